@@ -1,0 +1,146 @@
+"""Read audio and compute the model's mel features.
+
+Features follow the paper: a 128-band mel power spectrogram in dB, one frame per animation frame
+(hop = sample_rate / fps), exactly T = round(duration * fps) frames.
+
+The mel filterbank comes from librosa (`librosa.filters.mel`) when a model is trained and is stored
+in the model bundle with the rest of the feature configuration, so training and inference use the very
+same numbers and the animate path never imports librosa (whose first numba-compiled calls cost seconds).
+The STFT is torch's, which equals `librosa.stft` (Hann window, centred frames, zero padding); a test checks
+our features against `librosa.feature.melspectrogram` + `librosa.power_to_db`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from facegen.errors import FacegenError
+
+AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3", ".aiff", ".aif", ".opus")
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Audio feature parameters; stored in every model bundle."""
+
+    sample_rate: int = 16000
+    fps: float = 25.0
+    n_mels: int = 128
+    n_fft: int = 2048
+    fmin: float = 0.0
+    fmax: float | None = None
+    amin: float = 1e-10  # floor of the power before the log: silence is -100 dB
+
+    @property
+    def hop_length(self) -> int:
+        hop = self.sample_rate / self.fps
+        if abs(hop - round(hop)) > 1e-9:
+            raise FacegenError(f"fps {self.fps} does not divide the sample rate {self.sample_rate}: choose another fps")
+        return int(round(hop))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FeatureConfig:
+        return cls(**d)
+
+
+def mel_filters(cfg: FeatureConfig) -> np.ndarray:
+    """librosa's (Slaney) mel filterbank, [n_mels, 1 + n_fft // 2] float32."""
+    from librosa.filters import mel
+
+    return mel(sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin, fmax=cfg.fmax).astype(np.float32)
+
+
+def load_audio(path: str | os.PathLike) -> tuple[np.ndarray, int]:
+    """Read an audio file of any common format, rate, channel count and sample format.
+
+    Returns mono float32 samples in [-1, 1] at the file's own sample rate.
+    """
+    import soundfile as sf
+
+    path = Path(path)
+    if not path.exists():
+        raise FacegenError(f"audio file {path} does not exist: check the path")
+    if not path.is_file():
+        raise FacegenError(f"{path} is not a file: pass an audio file (.wav, .flac, .ogg, .mp3)")
+    try:
+        data, sr = sf.read(str(path), dtype="float32", always_2d=True)
+    except sf.LibsndfileError as exc:
+        raise FacegenError(
+            f"cannot read {path} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): "
+            "pass a WAV, FLAC, OGG or MP3 file"
+        ) from exc
+    except (OSError, RuntimeError) as exc:
+        raise FacegenError(f"cannot read {path} as audio ({exc}): pass a WAV, FLAC, OGG or MP3 file") from exc
+    samples = data.mean(axis=1) if data.shape[1] > 1 else data[:, 0]
+    samples = np.ascontiguousarray(samples, dtype=np.float32)
+    if not np.isfinite(samples).all():
+        raise FacegenError(f"audio file {path} contains NaN or infinite samples: re-export it")
+    return samples, int(sr)
+
+
+def resample(samples: np.ndarray, orig_sr: int, target_sr: int) -> np.ndarray:
+    """Resample with soxr (librosa's default resampler), float32 out."""
+    if orig_sr == target_sr:
+        return samples.astype(np.float32, copy=False)
+    import soxr
+
+    return soxr.resample(samples, orig_sr, target_sr, quality="HQ").astype(np.float32)
+
+
+def num_frames(duration: float, fps: float) -> int:
+    """The number of animation frames of a clip: round(duration * fps)."""
+    return int(round(duration * fps))
+
+
+def check_speech(samples: np.ndarray, sr: int, fps: float, name: str = "audio") -> None:
+    """Refuse audio that cannot be animated: shorter than one frame, or silent."""
+    if num_frames(len(samples) / sr, fps) < 1:
+        raise FacegenError(
+            f"{name} is {len(samples) / sr * 1000:.0f} ms long, shorter than one frame at {fps:g} fps: "
+            "pass a longer recording"
+        )
+    if float(np.max(np.abs(samples))) < 1e-4:
+        raise FacegenError(f"{name} is silent (peak below -80 dBFS): pass a recording with speech")
+
+
+def mel_features(
+    samples: np.ndarray, sr: int, cfg: FeatureConfig, filters: np.ndarray | None = None
+) -> np.ndarray:
+    """Mel power spectrogram in dB, [T, n_mels] float32 with T = round(duration * fps)."""
+    import torch
+
+    if filters is None:
+        filters = mel_filters(cfg)
+    y = resample(samples, sr, cfg.sample_rate)
+    T = num_frames(len(samples) / sr, cfg.fps)
+    hop = cfg.hop_length
+    with torch.inference_mode():
+        wav = torch.from_numpy(np.ascontiguousarray(y))
+        pad = cfg.n_fft // 2
+        if len(wav) <= pad:  # torch's padding needs more samples than the pad
+            wav = torch.nn.functional.pad(wav, (0, pad + 1 - len(wav)))
+        spec = torch.stft(
+            wav,
+            n_fft=cfg.n_fft,
+            hop_length=hop,
+            window=torch.hann_window(cfg.n_fft),
+            center=True,
+            pad_mode="constant",
+            return_complex=True,
+        )
+        power = spec.real.square() + spec.imag.square()  # [F, frames]
+        mel = torch.from_numpy(filters) @ power  # [n_mels, frames]
+        db = 10.0 * torch.log10(torch.clamp(mel, min=cfg.amin))
+    feats = db.T.numpy()
+    if feats.shape[0] >= T:
+        feats = feats[:T]
+    else:  # can only be short by a frame or so: repeat the last one
+        feats = np.concatenate([feats, np.repeat(feats[-1:], T - feats.shape[0], axis=0)])
+    return np.ascontiguousarray(feats, dtype=np.float32)

@@ -1,0 +1,176 @@
+"""Model bundle: one .safetensors file with the weights and everything needed to use them.
+
+Tensors: the network's state dict under `model.*`, plus `template.vertices` [V,3] f32,
+`template.faces` [F,3] i32, `region.<name>` (vertex indices, i64) and `audio.mel_filters`.
+Metadata (the safetensors header, key "facegen", JSON): format version, model and feature config,
+text backend id and dimension, speaker names, topology fingerprint, provenance. No pickle anywhere.
+Weights may be stored as float16 (`save_bundle(..., half=True)`); they are loaded back as float32.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from facegen.audio import FeatureConfig
+from facegen.errors import FacegenError
+from facegen.mesh import Mesh, topology_fingerprint
+from facegen.model import FaceModel, ModelConfig
+
+FORMAT_VERSION = 1
+DEFAULT_BUNDLE = "default.safetensors"
+
+
+@dataclass
+class Bundle:
+    model: FaceModel
+    features: FeatureConfig
+    mel_filters: np.ndarray
+    text_backend: str  # id for facegen.text.load_text_backend, or "none"
+    speakers: list[str]
+    template: Mesh
+    provenance: dict = field(default_factory=dict)
+    path: Path | None = None
+
+    @property
+    def config(self) -> ModelConfig:
+        return self.model.cfg
+
+    @property
+    def fingerprint(self) -> str:
+        return self.template.fingerprint()
+
+    def speaker_index(self, speaker: str | int | None) -> int:
+        """Resolve a speaker given by name or 0-based index; None means the first one."""
+        if speaker is None:
+            return 0
+        s = str(speaker)
+        if s in self.speakers:
+            return self.speakers.index(s)
+        if s.lstrip("-").isdigit() and 0 <= int(s) < len(self.speakers):
+            return int(s)
+        valid = ", ".join(f"{i}={n}" for i, n in enumerate(self.speakers))
+        raise FacegenError(f"unknown speaker {s!r}: choose one of {valid} (name or index)")
+
+    def metadata(self) -> dict:
+        return {
+            "format_version": FORMAT_VERSION,
+            "model_config": self.config.to_dict(),
+            "feature_config": self.features.to_dict(),
+            "text_backend": {"id": self.text_backend, "dim": self.config.text_dim},
+            "speakers": self.speakers,
+            "topology": {
+                "num_vertices": self.template.num_vertices,
+                "num_faces": int(self.template.faces.shape[0]),
+                "fingerprint": self.fingerprint,
+            },
+            "regions": {k: int(len(v)) for k, v in self.template.regions.items()},
+            "provenance": self.provenance,
+        }
+
+
+def save_bundle(bundle: Bundle, path: str | os.PathLike, half: bool = False) -> None:
+    """Write the bundle atomically; `half` stores float weights as float16."""
+    from safetensors.torch import save_file
+
+    from facegen.atomic import atomic_path
+
+    tensors: dict[str, torch.Tensor] = {}
+    for k, v in bundle.model.state_dict().items():
+        v = v.detach().cpu().contiguous()
+        tensors[f"model.{k}"] = v.half() if half and v.is_floating_point() else v
+    tensors["template.vertices"] = torch.from_numpy(np.ascontiguousarray(bundle.template.vertices, np.float32))
+    tensors["template.faces"] = torch.from_numpy(np.ascontiguousarray(bundle.template.faces, np.int32))
+    for name, idx in bundle.template.regions.items():
+        tensors[f"region.{name}"] = torch.from_numpy(np.ascontiguousarray(idx, np.int64))
+    tensors["audio.mel_filters"] = torch.from_numpy(np.ascontiguousarray(bundle.mel_filters, np.float32))
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata={"facegen": json.dumps(bundle.metadata())})
+
+
+def default_bundle_path() -> Path:
+    return Path(str(resources.files("facegen") / "models" / DEFAULT_BUNDLE))
+
+
+def read_metadata(path: str | os.PathLike) -> dict:
+    """The bundle's JSON metadata, without loading the weights."""
+    from safetensors import safe_open
+
+    path = Path(path)
+    if not path.is_file():
+        raise FacegenError(f"model bundle {path} does not exist: pass --model PATH to a .safetensors bundle")
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            raw = (f.metadata() or {}).get("facegen")
+    except Exception as exc:  # safetensors raises its own error types for corrupt headers
+        raise FacegenError(
+            f"model bundle {path} is corrupt or truncated ({exc}): re-download or re-train it"
+        ) from exc
+    if raw is None:
+        raise FacegenError(f"{path} is a safetensors file but not a facegen bundle (no 'facegen' metadata)")
+    try:
+        meta = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        raise FacegenError(f"model bundle {path} has corrupt metadata ({exc}): re-train or re-export it") from exc
+    if meta.get("format_version", 0) > FORMAT_VERSION:
+        raise FacegenError(
+            f"model bundle {path} has format version {meta['format_version']}, newer than this facegen "
+            f"reads ({FORMAT_VERSION}): upgrade facegen"
+        )
+    return meta
+
+
+def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
+    """Load a bundle (the built-in default model when `path` is None)."""
+    from safetensors.torch import load_file
+
+    if path is None:
+        path = default_bundle_path()
+        if not path.is_file():
+            raise FacegenError(
+                "the built-in default model is missing from this installation: reinstall facegen "
+                "or pass --model PATH"
+            )
+    path = Path(path)
+    meta = read_metadata(path)
+    try:
+        tensors = load_file(str(path))
+    except Exception as exc:
+        raise FacegenError(f"model bundle {path} is corrupt or truncated ({exc}): re-download or re-train it") from exc
+    try:
+        cfg = ModelConfig.from_dict(meta["model_config"])
+        model = FaceModel(cfg)
+        state = {k[len("model."):]: v.float() if v.is_floating_point() else v
+                 for k, v in tensors.items() if k.startswith("model.")}
+        model.load_state_dict(state)
+        regions = {k[len("region."):]: v.numpy() for k, v in tensors.items() if k.startswith("region.")}
+        template = Mesh(tensors["template.vertices"].numpy(), tensors["template.faces"].numpy(), regions)
+        features = FeatureConfig.from_dict(meta["feature_config"])
+        bundle = Bundle(
+            model=model.eval(),
+            features=features,
+            mel_filters=tensors["audio.mel_filters"].numpy(),
+            text_backend=meta["text_backend"]["id"],
+            speakers=list(meta["speakers"]),
+            template=template,
+            provenance=meta.get("provenance", {}),
+            path=path,
+        )
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        raise FacegenError(f"model bundle {path} is incomplete or inconsistent ({exc}): re-train or re-export it") from exc
+    if bundle.fingerprint != meta["topology"]["fingerprint"]:
+        raise FacegenError(f"model bundle {path} has a template that does not match its topology fingerprint: re-export it")
+    return bundle
+
+
+def topology_of(meta: dict) -> tuple[int, str]:
+    return int(meta["topology"]["num_vertices"]), str(meta["topology"]["fingerprint"])
+
+
+__all__ = ["Bundle", "save_bundle", "load_bundle", "read_metadata", "default_bundle_path", "topology_fingerprint"]

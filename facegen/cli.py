@@ -1,0 +1,180 @@
+"""The `facegen` command line: parse options, call the library, print, exit codes.
+
+Errors a user can cause (FacegenError, bad options) print one line and exit 2; `--debug` shows the traceback.
+Heavy libraries are imported inside the commands so `facegen --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from facegen import __version__
+from facegen.errors import FacegenError
+
+
+def _progress(quiet: bool):
+    if quiet:
+        return lambda _msg: None
+    return lambda msg: click.echo(f"facegen: {msg}", err=True)
+
+
+def _read_text(text: str | None, text_file: str | None) -> str | None:
+    if text_file is None:
+        return text
+    try:
+        return Path(text_file).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FacegenError(f"cannot read transcript file {text_file} ({exc}): pass a UTF-8 text file") from exc
+
+
+def _one_of(**options) -> None:
+    given = [k for k, v in options.items() if v]
+    if len(given) > 1:
+        names = " and ".join("--" + k.replace("_", "-") for k in given)
+        raise FacegenError(f"{names} cannot be used together: give only one source of words")
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="facegen")
+@click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
+def cli(debug: bool) -> None:
+    """Speech (audio + transcript) to expressive 3D face animation in USD, glTF and npy."""
+
+
+@cli.command()
+@click.argument("audio", type=click.Path(dir_okay=False))
+@click.option("--text", "-t", help="The transcript (words spoken).")
+@click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")
+@click.option("--alignment", type=click.Path(dir_okay=False),
+              help="Word timings you already have: Gentle/WhisperX JSON, TextGrid, JSON or CSV word list.")
+@click.option("--no-text", is_flag=True, help="Use no words at all (zero text features).")
+@click.option("--speaker", "-s", help="Speaking style: a speaker name or index of the model (default: the first).")
+@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Model bundle (default: the built-in model).")
+@click.option("--template", type=click.Path(dir_okay=False),
+              help="A face mesh (PLY/OBJ) with the model's topology to animate instead of its template.")
+@click.option("--text-model", help="Local folder (or cached id) of the text model, if not where the bundle says.")
+@click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
+              help="Output file: .usda .usdc .usd .npy (and more, see README).")
+@click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
+def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, quiet):
+    """Animate the face for AUDIO and write OUTPUT."""
+    from facegen.animate import animate as run
+    from facegen.exchange import check_output_path, write_animation
+
+    _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
+    check_output_path(output)
+    progress = _progress(quiet)
+    anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
+               bundle=model, template=template, text_model=text_model, progress=progress)
+    written = write_animation(anim, output)
+    progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
+
+
+@cli.command()
+@click.argument("audio", type=click.Path(dir_okay=False))
+@click.option("--text", "-t", help="The transcript.")
+@click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False),
+              help="words.json or words.TextGrid (default: JSON on stdout).")
+def align(audio, text, text_file, output):
+    """Find when each word of the transcript is spoken in AUDIO."""
+    from facegen import align as al
+    from facegen.animate import get_words
+    from facegen.audio import check_speech, load_audio
+
+    _one_of(text=text, text_file=text_file)
+    if output and Path(output).suffix.lower() not in (".json", ".textgrid"):
+        raise FacegenError(f"cannot write alignments as {Path(output).suffix or 'no extension'}: use .json or .TextGrid")
+    samples, sr = load_audio(audio)
+    check_speech(samples, sr, 25.0, name=f"audio file {audio}")
+    words, _ = get_words(samples, sr, text=_read_text(text, text_file), progress=_progress(bool(output) is False))
+    if output:
+        al.write_alignment(words, output)
+    else:
+        click.echo(json.dumps({"words": [{"word": w.text, "start": w.start, "end": w.end} for w in words]}, indent=1))
+
+
+@cli.command()
+@click.argument("bundle", required=False, type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print the metadata as JSON.")
+def info(bundle, as_json):
+    """Describe a model BUNDLE (default: the built-in model)."""
+    from facegen.bundle import default_bundle_path, read_metadata
+
+    path = Path(bundle) if bundle else default_bundle_path()
+    meta = read_metadata(path)
+    if as_json:
+        click.echo(json.dumps(meta, indent=2))
+        return
+    cfg, feat, topo = meta["model_config"], meta["feature_config"], meta["topology"]
+    lines = [
+        f"model bundle   {path}",
+        f"format         {meta['format_version']}",
+        f"network        modalities={cfg['modalities']} fusion={cfg['fusion']} text_dim={cfg['text_dim']}",
+        f"text backend   {meta['text_backend']['id']} ({meta['text_backend']['dim']}-d)",
+        f"audio          {feat['n_mels']} mel bands, {feat['sample_rate']} Hz, {feat['fps']:g} fps",
+        f"speakers       {', '.join(f'{i}={s}' for i, s in enumerate(meta['speakers']))}",
+        f"topology       {topo['num_vertices']} vertices, {topo['num_faces']} faces, fingerprint {topo['fingerprint']}",
+        f"regions        {', '.join(f'{k} ({v} vertices)' for k, v in meta.get('regions', {}).items()) or 'none'}",
+    ]
+    for k, v in meta.get("provenance", {}).items():
+        lines.append(f"{k:<14} {json.dumps(v) if isinstance(v, dict | list) else v}")
+    click.echo("\n".join(lines))
+
+
+@cli.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Check against this bundle's template.")
+@click.option("--template", type=click.Path(dir_okay=False), help="Check against this mesh (PLY/OBJ).")
+@click.option("--fps", type=float, help="The frame rate the file must have.")
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable report.")
+def validate(file, model, template, fps, as_json):
+    """Check an animation FILE written by facegen (or another tool). Exit 1 when a check fails."""
+    from facegen.validate import validate as run
+
+    if model and template:
+        raise FacegenError("--model and --template cannot be used together: pass one reference")
+    mesh = None
+    if model:
+        from facegen.bundle import load_bundle
+
+        mesh = load_bundle(model).template
+    elif template:
+        from facegen.mesh import read_mesh
+
+        mesh = read_mesh(template)
+    report = run(file, template=mesh, fps=fps)
+    click.echo(report.to_json() if as_json else report.to_text())
+    sys.exit(0 if report.ok else 1)
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    debug = "--debug" in argv
+    try:
+        cli.main(args=argv, prog_name="facegen", standalone_mode=False)
+    except FacegenError as exc:
+        if debug:
+            raise
+        click.echo(f"facegen: error: {exc}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("facegen: interrupted", err=True)
+        sys.exit(130)
+    except click.ClickException as exc:
+        hint = f" (see 'facegen {exc.ctx.info_name} --help')" if getattr(exc, "ctx", None) else ""
+        click.echo(f"facegen: error: {exc.format_message()}{hint}", err=True)
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        click.echo("facegen: interrupted", err=True)
+        sys.exit(130)
+    except Exception as exc:
+        if debug:
+            raise
+        click.echo(f"facegen: internal error: {type(exc).__name__}: {exc} (rerun with --debug and report it)",
+                   err=True)
+        sys.exit(1)

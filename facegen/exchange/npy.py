@@ -1,0 +1,76 @@
+"""NumPy .npy: vertex positions as a [T, 3V] float32 array (the FaceFormer/CodeTalker layout).
+
+Row t is frame t, columns x0 y0 z0 x1 y1 z1 ...; faces and fps are not stored (the template mesh and
+`--fps`, 25 by default, supply them). The audio goes beside the file as a WAV sidecar (`out.wav`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from facegen.animation import Animation
+from facegen.errors import FacegenError
+from facegen.exchange.wav import atomic_with_sidecar, read_wav, sidecar_path
+from facegen.mesh import Mesh
+
+EXTENSIONS = (".npy",)
+DEFAULT_FPS = 25.0
+
+
+def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True) -> list[Path]:
+    """Write the frames as [T, 3V] float32 and, when there is audio, a WAV sidecar; return the files."""
+    from facegen.exchange import check_animation
+
+    check_animation(anim)
+    path = Path(path)
+    flat = np.ascontiguousarray(anim.vertices, dtype=np.float32).reshape(anim.num_frames, -1)
+    audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
+    with atomic_with_sidecar(path, audio, anim.sample_rate) as (tmp, wav):
+        with open(tmp, "wb") as f:
+            np.save(f, flat, allow_pickle=False)
+    return [path] if wav is None else [path, wav]
+
+
+def load_frames(path: str | os.PathLike) -> np.ndarray:
+    """The raw [T, 3V] array of a .npy file (no pickles); unreadable files are a FacegenError."""
+    path = Path(path)
+    if not path.is_file():
+        raise FacegenError(f"file {path} does not exist: pass an existing .npy file")
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise FacegenError(f"cannot read {path} as .npy ({exc}): pass a [T, 3V] float array file") from exc
+    if data.ndim != 2 or data.shape[0] == 0 or data.shape[1] == 0 or data.shape[1] % 3:
+        raise FacegenError(f"{path} has shape {list(data.shape)}, expected [T, 3V]: pass a vertex array file")
+    if not np.issubdtype(data.dtype, np.floating):
+        raise FacegenError(f"{path} holds {data.dtype} values, expected floats: pass a vertex array file")
+    return data
+
+
+def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:
+    """Read a [T, 3V] .npy file with the template's faces; the WAV sidecar beside it becomes the audio."""
+    if template is None:
+        raise FacegenError(f"{Path(path).name} stores only vertex positions: pass the template mesh (--template)")
+    data = load_frames(path)
+    num_vertices = data.shape[1] // 3
+    if num_vertices != template.num_vertices:
+        raise FacegenError(
+            f"{path} has {num_vertices} vertices per frame but the template has {template.num_vertices}: "
+            "pass the template the file was made with"
+        )
+    audio, sample_rate = None, 16000
+    wav = sidecar_path(path)
+    if wav.is_file():
+        audio, sample_rate = read_wav(wav)
+    return Animation(
+        vertices=data.reshape(len(data), num_vertices, 3).astype(np.float32),
+        faces=np.asarray(template.faces, dtype=np.int32),
+        fps=float(fps if fps is not None else DEFAULT_FPS),
+        template=np.asarray(template.vertices, dtype=np.float32),
+        audio=audio,
+        sample_rate=sample_rate,
+        regions=dict(template.regions),
+    )

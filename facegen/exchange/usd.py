@@ -1,0 +1,321 @@
+"""USD: the animation as one UsdGeom.Mesh with one `points` time sample per frame, audio beside it.
+
+Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate):
+
+    /Face          Xform, kind=component, the stage's defaultPrim
+    /Face/Mesh     Mesh: faceVertexCounts (all 3), faceVertexIndices, subdivisionScheme "none",
+                   orientation rightHanded (BIWI triangles wind counter-clockwise seen from the front, so
+                   normals face +Z, out of the face); `points` and `extent` have one time sample per
+                   frame at time codes 0..T-1, and their default (non-animated) values hold the rest pose
+    /Face/Audio    SpatialAudio: filePath @./out.wav@ (relative to the layer), auralMode nonSpatial,
+                   playbackMode onceFromStart, startTime 0, endTime = the audio's length in time codes
+
+Stage metadata: timeCodesPerSecond = framesPerSecond = fps, startTimeCode 0, endTimeCode T-1, upAxis Y,
+metersPerUnit (`meters_per_unit`, default 0.2: BIWI coordinates are scaled to unit surface area, and a
+face mask is about 0.04 m², so one unit is about 0.2 m and the face is about 19 cm tall), and
+customLayerData["facegen"] = {version, fps, frames, metadata (the animation's metadata, JSON-able values
+only; lists of one scalar type become typed arrays, other lists JSON strings)}.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from facegen import __version__
+from facegen.animation import Animation
+from facegen.errors import FacegenError
+from facegen.exchange.wav import atomic_with_sidecar, read_wav
+from facegen.mesh import Mesh, check_topology
+
+EXTENSIONS = (".usda", ".usdc", ".usd")
+DEFAULT_METERS_PER_UNIT = 0.2
+ROOT_PATH = "/Face"
+MESH_PATH = "/Face/Mesh"
+AUDIO_PATH = "/Face/Audio"
+
+
+def write(
+    anim: Animation,
+    path: str | os.PathLike,
+    *,
+    meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
+    write_audio: bool = True,
+) -> list[Path]:
+    """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
+
+    Returns the files written: the USD file, then the WAV when the animation has audio and
+    `write_audio` is true.
+    """
+    from pxr import Sdf, Usd
+
+    from facegen.exchange import check_animation
+
+    check_animation(anim)
+    path = Path(path)
+    if path.suffix.lower() not in EXTENSIONS:
+        raise FacegenError(f"{path} is not a USD file name: use .usda, .usdc or .usd")
+    if not meters_per_unit > 0:
+        raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
+    audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
+    with atomic_with_sidecar(path, audio, anim.sample_rate) as (tmp, wav):
+        layer = Sdf.Layer.CreateNew(str(tmp))
+        if layer is None:
+            raise FacegenError(f"cannot create USD layer {tmp}: check the output folder")
+        stage = Usd.Stage.Open(layer)
+        _author_stage(stage, anim, meters_per_unit, f"./{wav.name}" if wav is not None else None)
+        _author_samples(layer, anim)
+        if not layer.Save():
+            raise FacegenError(f"cannot write {path}: check free disk space and permissions")
+        del stage, layer
+    return [path] if wav is None else [path, wav]
+
+
+def _author_stage(stage, anim: Animation, meters_per_unit: float, audio_asset: str | None) -> None:
+    """Everything except the per-frame samples: stage metadata, prims, topology, rest pose, audio."""
+    from pxr import Kind, Sdf, Usd, UsdGeom, UsdMedia, Vt
+
+    frames = anim.num_frames
+    stage.SetTimeCodesPerSecond(float(anim.fps))
+    stage.SetFramesPerSecond(float(anim.fps))
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(float(frames - 1))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
+
+    root = UsdGeom.Xform.Define(stage, ROOT_PATH)
+    Usd.ModelAPI(root.GetPrim()).SetKind(Kind.Tokens.component)
+    stage.SetDefaultPrim(root.GetPrim())
+
+    mesh = UsdGeom.Mesh.Define(stage, MESH_PATH)
+    faces = np.ascontiguousarray(anim.faces, dtype=np.int32)
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1)))
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    rest = np.ascontiguousarray(anim.template, dtype=np.float32)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest))
+    mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([rest.min(0), rest.max(0)])))
+
+    if audio_asset is not None:
+        sound = UsdMedia.SpatialAudio.Define(stage, AUDIO_PATH)
+        sound.CreateFilePathAttr(Sdf.AssetPath(audio_asset))
+        sound.CreateAuralModeAttr(UsdMedia.Tokens.nonSpatial)
+        sound.CreatePlaybackModeAttr(UsdMedia.Tokens.onceFromStart)
+        sound.CreateStartTimeAttr(Sdf.TimeCode(0.0))
+        audio_frames = len(anim.audio) / anim.sample_rate * anim.fps
+        sound.CreateEndTimeAttr(Sdf.TimeCode(float(audio_frames)))
+
+    stage.GetRootLayer().customLayerData = {
+        "facegen": {
+            "version": __version__,
+            "fps": float(anim.fps),
+            "frames": int(frames),
+            "metadata": _usd_dict(anim.metadata),
+        }
+    }
+
+
+def _author_samples(layer, anim: Animation) -> None:
+    """One `points` and one `extent` time sample per frame, written straight into the layer."""
+    from pxr import Sdf, Vt
+
+    vertices = np.ascontiguousarray(anim.vertices, dtype=np.float32)
+    extents = np.ascontiguousarray(np.stack([vertices.min(axis=1), vertices.max(axis=1)], axis=1))
+    points = Sdf.Path(MESH_PATH).AppendProperty("points")
+    extent = Sdf.Path(MESH_PATH).AppendProperty("extent")
+    with Sdf.ChangeBlock():
+        for i in range(len(vertices)):
+            layer.SetTimeSample(points, float(i), Vt.Vec3fArray.FromNumpy(vertices[i]))
+            layer.SetTimeSample(extent, float(i), Vt.Vec3fArray.FromNumpy(extents[i]))
+
+
+def _usd_dict(values: dict) -> dict:
+    """The JSON-able part of a dict as USD dictionary values (lists become typed Vt arrays)."""
+    out = {}
+    for key, value in values.items():
+        converted = _usd_value(value)
+        if converted is not None:
+            out[str(key)] = converted
+    return out
+
+
+def _usd_value(value):
+    from pxr import Vt
+
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, dict):
+        return _usd_dict(value)
+    if isinstance(value, list | tuple | np.ndarray):
+        items = [v.item() if isinstance(v, np.generic) else v for v in value]
+        if items and all(isinstance(v, str) for v in items):
+            return Vt.StringArray(items)
+        if items and all(isinstance(v, int) and not isinstance(v, bool) for v in items):
+            return Vt.Int64Array(items)
+        if items and all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
+            return Vt.DoubleArray([float(v) for v in items])
+        try:
+            return json.dumps(items)
+        except (TypeError, ValueError):
+            return None
+    return None
+
+
+def _python_value(value):
+    """USD dictionary values back to plain Python (Vt arrays become lists)."""
+    if isinstance(value, dict):
+        return {k: _python_value(v) for k, v in value.items()}
+    if isinstance(value, bool | int | float | str):
+        return value
+    try:
+        return [_python_value(v) for v in value]
+    except TypeError:
+        return str(value)
+
+
+# ---- reading -----------------------------------------------------------------------------------------
+
+
+def open_stage(path: str | os.PathLike):
+    """Open a USD stage; a missing or unreadable file is a FacegenError."""
+    from pxr import Sdf, Tf, Usd
+
+    path = Path(path)
+    if not path.is_file():
+        raise FacegenError(f"USD file {path} does not exist: pass an existing .usda/.usdc/.usd file")
+    try:
+        cached = Sdf.Layer.Find(str(path))
+        if cached is not None:  # a layer still held in this process: read the file as it is now
+            cached.Reload(force=True)
+        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
+    except Tf.ErrorException as exc:
+        raise FacegenError(f"cannot open USD file {path} ({str(exc).strip()}): pass a valid USD file") from exc
+    if stage is None:
+        raise FacegenError(f"cannot open USD file {path}: pass a valid USD file")
+    return stage
+
+
+def find_mesh(stage):
+    """The animated face mesh: the first Mesh under the default prim (else anywhere), or None."""
+    from pxr import Usd, UsdGeom
+
+    root = stage.GetDefaultPrim()
+    prims = Usd.PrimRange(root) if root else stage.Traverse()
+    for prim in prims:
+        if prim.IsA(UsdGeom.Mesh):
+            return UsdGeom.Mesh(prim)
+    if root:
+        for prim in stage.Traverse():
+            if prim.IsA(UsdGeom.Mesh):
+                return UsdGeom.Mesh(prim)
+    return None
+
+
+def find_audio(stage):
+    """The first SpatialAudio prim of the stage, or None."""
+    from pxr import UsdMedia
+
+    for prim in stage.Traverse():
+        if prim.IsA(UsdMedia.SpatialAudio):
+            return UsdMedia.SpatialAudio(prim)
+    return None
+
+
+def mesh_faces(mesh) -> np.ndarray:
+    """The mesh's triangles as [F, 3] int32; a mesh with other polygons is a FacegenError."""
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
+    if len(counts) == 0 or not (counts == 3).all() or len(indices) != 3 * len(counts):
+        raise FacegenError(
+            f"mesh {mesh.GetPath()} is not a triangle mesh (face sizes {sorted(set(counts.tolist()))[:5]}): "
+            "triangulate it before export"
+        )
+    return indices.reshape(-1, 3)
+
+
+def points_samples(mesh) -> tuple[list[float], list[np.ndarray]]:
+    """The time codes of the mesh's `points` samples and the [V, 3] float32 array at each."""
+    attr = mesh.GetPointsAttr()
+    times = list(attr.GetTimeSamples())
+    return times, [np.asarray(attr.Get(t), dtype=np.float32) for t in times]
+
+
+def rest_points(mesh) -> np.ndarray | None:
+    """The default (non-animated) `points` value, which facegen writes as the rest pose."""
+    from pxr import Usd
+
+    value = mesh.GetPointsAttr().Get(Usd.TimeCode.Default())
+    return None if value is None or len(value) == 0 else np.asarray(value, dtype=np.float32)
+
+
+def stage_fps(stage) -> float | None:
+    """The stage's timeCodesPerSecond when its root layer authors it (or framesPerSecond), else None."""
+    layer = stage.GetRootLayer()
+    if layer.HasTimeCodesPerSecond() or layer.HasFramesPerSecond():
+        return float(stage.GetTimeCodesPerSecond())
+    return None
+
+
+def audio_file(sound) -> tuple[str, str]:
+    """(authored asset path, resolved absolute path or '') of a SpatialAudio prim's filePath."""
+    asset = sound.GetFilePathAttr().Get()
+    if asset is None:
+        return "", ""
+    return asset.path, asset.resolvedPath
+
+
+def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:
+    """Read a USD face animation: the mesh's faces, one frame per `points` time sample, fps, audio.
+
+    The fps is the stage's timeCodesPerSecond (`fps`, else 25, when it is not authored); asking for an
+    fps the file contradicts is a FacegenError. With `template`, the file's topology must match it.
+    """
+    stage = open_stage(path)
+    mesh = find_mesh(stage)
+    if mesh is None:
+        raise FacegenError(f"{path} has no UsdGeom.Mesh: pass a facegen USD animation")
+    faces = mesh_faces(mesh)
+    times, frames = points_samples(mesh)
+    if not frames:
+        raise FacegenError(f"{path}: mesh {mesh.GetPath()} has no points time samples: nothing to read")
+    if len({len(f) for f in frames}) != 1:
+        raise FacegenError(f"{path}: the points samples have different vertex counts: the file is broken")
+    vertices = np.stack(frames)
+    file_fps = stage_fps(stage)
+    if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-6:
+        raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")
+    rate = float(file_fps if file_fps is not None else fps if fps is not None else 25.0)
+    if template is not None:
+        check_topology(Mesh(vertices[0], faces), template.num_vertices, template.faces, f"{path}")
+        rest = template.vertices
+    else:
+        rest = rest_points(mesh)
+        if rest is None or rest.shape != vertices.shape[1:]:
+            rest = vertices[0]
+    audio, sample_rate = None, 16000
+    sound = find_audio(stage)
+    if sound is not None:
+        asset, resolved = audio_file(sound)
+        if not resolved:
+            raise FacegenError(f"{path} refers to audio {asset!r}, which is missing: put it beside the file")
+        audio, sample_rate = read_wav(resolved)
+    info = stage.GetRootLayer().customLayerData.get("facegen", {})
+    metadata = _python_value(info.get("metadata", {})) if isinstance(info, dict) else {}
+    return Animation(
+        vertices=vertices,
+        faces=faces,
+        fps=rate,
+        template=np.asarray(rest, dtype=np.float32),
+        audio=audio,
+        sample_rate=sample_rate,
+        regions=dict(template.regions) if template is not None else {},
+        metadata=metadata,
+    )

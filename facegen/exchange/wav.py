@@ -1,0 +1,71 @@
+"""The audio sidecar: the clip's sound written as a WAV file beside an animation file.
+
+`out.usda` gets `out.wav` (PCM 16-bit, mono, at the animation's sample rate). The main file and its
+sidecar are written together: both through temporary files, so a failed write leaves neither.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from facegen.atomic import atomic_path
+from facegen.errors import FacegenError
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """The WAV file that goes with an animation file: same folder, same stem, `.wav`."""
+    return Path(path).with_suffix(".wav")
+
+
+def write_wav(audio: np.ndarray, sample_rate: int, path: str | os.PathLike) -> None:
+    """Write mono float audio as 16-bit PCM WAV (samples clipped to [-1, 1])."""
+    import soundfile as sf
+
+    samples = np.clip(np.asarray(audio, dtype=np.float32).reshape(-1), -1.0, 1.0)
+    sf.write(str(path), samples, int(sample_rate), subtype="PCM_16", format="WAV")
+
+
+def read_wav(path: str | os.PathLike) -> tuple[np.ndarray, int]:
+    """Read an audio file as mono float32 samples (channels averaged) and its sample rate."""
+    import soundfile as sf
+
+    try:
+        data, sample_rate = sf.read(str(path), dtype="float32", always_2d=True)
+    except (OSError, RuntimeError) as exc:  # sf.LibsndfileError is a RuntimeError
+        raise FacegenError(f"cannot read audio file {path} ({exc}): pass a readable WAV/FLAC/OGG file") from exc
+    return data.mean(axis=1).astype(np.float32), int(sample_rate)
+
+
+@contextlib.contextmanager
+def atomic_with_sidecar(
+    target: str | os.PathLike, audio: np.ndarray | None, sample_rate: int
+) -> Iterator[tuple[Path, Path | None]]:
+    """Yield (temporary main path, final sidecar path or None) for writing `target` with its audio.
+
+    The sidecar WAV is written first to its own temporary file; both files are renamed into place
+    only when the caller's block succeeds. On failure neither file is left behind.
+    """
+    target = Path(target)
+    if audio is None:
+        with atomic_path(target) as tmp:
+            yield tmp, None
+        return
+    wav = sidecar_path(target)
+    if wav == target:
+        raise FacegenError(f"output {target} would be overwritten by its own audio sidecar: use another name")
+    placed = False
+    try:
+        with atomic_path(target) as tmp:
+            with atomic_path(wav) as tmp_wav:
+                write_wav(audio, sample_rate, tmp_wav)
+                yield tmp, wav
+            placed = True  # the sidecar is in place; the main file is renamed next
+    except BaseException:
+        if placed:
+            wav.unlink(missing_ok=True)
+        raise

@@ -1,0 +1,190 @@
+"""The joint audio-text network of the paper (Fan et al., "Joint Audio-Text Model for Expressive
+Speech-Driven 3D Facial Animation"), in one place.
+
+    mel [T,128] ─► audio encoder: 4 dilated temporal convs (128 filters, kernel 3, dilations 1,2,4,8,
+                   LeakyReLU, residual) ─► concat one-hot speaker ─► FC 128            = Ha [T,128]
+    text [T,D]  ─► text encoder: FC 128, LeakyReLU, FC 64, LSTM 64                      = Hl [T,64]
+    fusion:        tensor: [Ha;1] ⊗ [Hl;1] (129 × 65 = 8385 per frame)  |  concat: [Ha;Hl]
+    decoder:       FC 128 ─► BiLSTM 128 ─► BiLSTM 128 ─► FC 3V = vertex offsets; output = template + offsets
+
+Choices where the paper is silent or ambiguous (stated once, here):
+- "128 filters of size 3×3": the convolutions are temporal (1-D over frames) with the 128 mel bands as
+  input channels, so a "3×3" filter is read as kernel 3 in time (Conv1d, kernel_size=3); padding equal to
+  the dilation keeps T frames. Residual: h ← h + LeakyReLU(conv(h)) for every layer (input has 128 bands,
+  so the first residual needs no projection).
+- LeakyReLU slope 0.2 everywhere; the FC 128 after the speaker concat and the decoder's first FC are
+  followed by LeakyReLU too (the paper lists only layers).
+- The text encoder's LSTM is unidirectional, as written. The 2 decoder BiLSTMs have 128 units per
+  direction (256 outputs).
+- Mel dB features are standardised per band with statistics of the training set, stored as buffers in the
+  model (the paper does not say); text features are used as given.
+- Text-only ablation: the speaker one-hot is concatenated to Hl (there is no audio encoder to carry it).
+- The last FC starts at zero, so an untrained model outputs the template (as FaceFormer does).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import torch
+from torch import nn
+
+MODALITIES = ("both", "audio", "text")
+FUSIONS = ("tensor", "concat")
+
+
+@dataclass
+class ModelConfig:
+    num_vertices: int
+    num_speakers: int
+    text_dim: int = 384
+    n_mels: int = 128
+    modalities: str = "both"  # both | audio | text
+    fusion: str = "tensor"  # tensor | concat (only with both)
+    conv_channels: int = 128
+    kernel_size: int = 3
+    dilations: list[int] = field(default_factory=lambda: [1, 2, 4, 8])
+    audio_dim: int = 128
+    text_hidden: int = 128
+    text_dim_out: int = 64
+    decoder_dim: int = 128
+    lstm_dim: int = 128
+    lstm_layers: int = 2
+    leaky_slope: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.modalities not in MODALITIES:
+            raise ValueError(f"modalities must be one of {MODALITIES}, not {self.modalities!r}")
+        if self.fusion not in FUSIONS:
+            raise ValueError(f"fusion must be one of {FUSIONS}, not {self.fusion!r}")
+
+    @property
+    def uses_audio(self) -> bool:
+        return self.modalities in ("both", "audio")
+
+    @property
+    def uses_text(self) -> bool:
+        return self.modalities in ("both", "text")
+
+    @property
+    def receptive_field(self) -> int:
+        """Frames of context the audio convolutions see on each side."""
+        return sum(d * (self.kernel_size - 1) // 2 for d in self.dilations)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ModelConfig:
+        return cls(**d)
+
+
+class AudioEncoder(nn.Module):
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.inp = (
+            nn.Identity() if cfg.n_mels == cfg.conv_channels else nn.Conv1d(cfg.n_mels, cfg.conv_channels, 1)
+        )
+        self.convs = nn.ModuleList(
+            nn.Conv1d(cfg.conv_channels, cfg.conv_channels, cfg.kernel_size, dilation=d,
+                      padding=d * (cfg.kernel_size - 1) // 2)
+            for d in cfg.dilations
+        )
+        self.act = nn.LeakyReLU(cfg.leaky_slope)
+        self.fc = nn.Linear(cfg.conv_channels + cfg.num_speakers, cfg.audio_dim)
+
+    def forward(self, mel: torch.Tensor, speaker: torch.Tensor) -> torch.Tensor:
+        """mel [B,T,n_mels] (standardised), speaker one-hot [B,S] → Ha [B,T,audio_dim]."""
+        h = self.inp(mel.transpose(1, 2))
+        for conv in self.convs:
+            h = h + self.act(conv(h))
+        h = h.transpose(1, 2)
+        spk = speaker[:, None, :].expand(-1, h.shape[1], -1)
+        return self.act(self.fc(torch.cat([h, spk], dim=-1)))
+
+
+class TextEncoder(nn.Module):
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.fc1 = nn.Linear(cfg.text_dim, cfg.text_hidden)
+        self.act = nn.LeakyReLU(cfg.leaky_slope)
+        self.fc2 = nn.Linear(cfg.text_hidden, cfg.text_dim_out)
+        self.lstm = nn.LSTM(cfg.text_dim_out, cfg.text_dim_out, batch_first=True)
+
+    def forward(self, text: torch.Tensor) -> torch.Tensor:
+        """text [B,T,text_dim] → Hl [B,T,text_dim_out]."""
+        h, _ = self.lstm(self.fc2(self.act(self.fc1(text))))
+        return h
+
+
+def tensor_fusion(ha: torch.Tensor, hl: torch.Tensor) -> torch.Tensor:
+    """[Ha;1] ⊗ [Hl;1] per frame, flattened: [B,T,(A+1)(L+1)] (Zadeh et al. 2017)."""
+    one = ha.new_ones(ha.shape[:-1] + (1,))
+    a = torch.cat([ha, one], dim=-1)
+    lang = torch.cat([hl, one], dim=-1)
+    return (a.unsqueeze(-1) * lang.unsqueeze(-2)).flatten(-2)
+
+
+class FaceModel(nn.Module):
+    """Predicts per-frame vertex offsets [B,T,V,3] from mel and text features and a speaker."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.register_buffer("mel_mean", torch.zeros(cfg.n_mels))
+        self.register_buffer("mel_std", torch.ones(cfg.n_mels))
+        self.audio = AudioEncoder(cfg) if cfg.uses_audio else None
+        self.text = TextEncoder(cfg) if cfg.uses_text else None
+        if cfg.modalities == "both":
+            fused = ((cfg.audio_dim + 1) * (cfg.text_dim_out + 1) if cfg.fusion == "tensor"
+                     else cfg.audio_dim + cfg.text_dim_out)
+        elif cfg.modalities == "audio":
+            fused = cfg.audio_dim
+        else:
+            fused = cfg.text_dim_out + cfg.num_speakers
+        self.fc_in = nn.Linear(fused, cfg.decoder_dim)
+        self.act = nn.LeakyReLU(cfg.leaky_slope)
+        self.lstm = nn.LSTM(cfg.decoder_dim, cfg.lstm_dim, num_layers=cfg.lstm_layers,
+                            batch_first=True, bidirectional=True)
+        self.fc_out = nn.Linear(2 * cfg.lstm_dim, 3 * cfg.num_vertices)
+        nn.init.zeros_(self.fc_out.weight)
+        nn.init.zeros_(self.fc_out.bias)
+
+    def encode(self, mel: torch.Tensor | None, text: torch.Tensor | None,
+               speaker: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The encoders' outputs (used by forward and by the correlation analysis)."""
+        out: dict[str, torch.Tensor] = {}
+        if self.audio is not None:
+            out["audio"] = self.audio((mel - self.mel_mean) / self.mel_std, speaker)
+        if self.text is not None:
+            out["text"] = self.text(text)
+        return out
+
+    def fuse(self, enc: dict[str, torch.Tensor], speaker: torch.Tensor) -> torch.Tensor:
+        if self.cfg.modalities == "audio":
+            return enc["audio"]
+        if self.cfg.modalities == "text":
+            spk = speaker[:, None, :].expand(-1, enc["text"].shape[1], -1)
+            return torch.cat([enc["text"], spk], dim=-1)
+        if self.cfg.fusion == "tensor":
+            return tensor_fusion(enc["audio"], enc["text"])
+        return torch.cat([enc["audio"], enc["text"]], dim=-1)
+
+    def decode_hidden(self, fused: torch.Tensor) -> torch.Tensor:
+        """Fused features [B,T,F] → BiLSTM states [B,T,2*lstm_dim]."""
+        h, _ = self.lstm(self.act(self.fc_in(fused)))
+        return h
+
+    def forward(self, mel: torch.Tensor | None, text: torch.Tensor | None,
+                speaker: torch.Tensor) -> torch.Tensor:
+        """mel [B,T,n_mels], text [B,T,text_dim], speaker one-hot [B,S] → offsets [B,T,V,3]."""
+        enc = self.encode(mel, text, speaker)
+        h = self.decode_hidden(self.fuse(enc, speaker))
+        out = self.fc_out(h)
+        return out.view(out.shape[0], out.shape[1], self.cfg.num_vertices, 3)
+
+
+def one_hot(index: int, num_speakers: int, batch: int = 1) -> torch.Tensor:
+    v = torch.zeros(batch, num_speakers)
+    v[:, index] = 1.0
+    return v

@@ -1,0 +1,1 @@
+"""Synthetic data: procedural face, rig and synthetic speech (libespeak-ng)."""

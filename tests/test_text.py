@@ -1,0 +1,278 @@
+"""Text features: LM backends (tiny GPT-2 with the real BPE, packaged MiniLM), frame layout, smoothing."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import torch
+from tiny_gpt2 import make_tiny_gpt2
+from transformers import AutoTokenizer
+
+from facegen.errors import FacegenError
+from facegen.text import (
+    frame_features,
+    load_text_backend,
+    smooth_frames,
+    text_features,
+    zero_features,
+)
+
+
+@dataclass
+class W:
+    """Same fields as facegen.align.Word."""
+
+    text: str
+    start: float
+    end: float
+
+
+@pytest.fixture(scope="module")
+def gpt2_dir(tmp_path_factory):
+    return make_tiny_gpt2(tmp_path_factory.mktemp("tiny_gpt2"), n_positions=64)
+
+
+@pytest.fixture(scope="module")
+def gpt2(gpt2_dir):
+    return load_text_backend("gpt2", gpt2_dir)
+
+
+@pytest.fixture(scope="module")
+def minilm():
+    return load_text_backend("minilm")
+
+
+def naive_smooth(x: np.ndarray, before: int = 8, after: int = 7) -> np.ndarray:
+    out = np.zeros_like(x)
+    for t in range(len(x)):
+        lo, hi = max(0, t - before), min(len(x), t + after + 1)
+        out[t] = x[lo:hi].mean(axis=0)
+    return out
+
+
+# ---------------------------------------------------------------- GPT-2 path (tiny random weights)
+
+
+def test_tiny_gpt2_has_real_gpt2_tokenizer(gpt2_dir, gpt2):
+    tok = AutoTokenizer.from_pretrained(gpt2_dir, local_files_only=True)
+    assert tok("hello world")["input_ids"] == [31373, 995]
+    assert gpt2.tokenizer("hello world")["input_ids"] == [31373, 995]
+    assert gpt2.tokenizer(" world")["input_ids"] == [995]  # leading-space convention ("Ġworld")
+
+
+def test_gpt2_backend_dims_and_id(gpt2):
+    assert gpt2.id == "gpt2"
+    assert gpt2.dim == 32
+    assert gpt2.max_tokens == 64
+
+
+def test_gpt2_pools_the_mean_of_each_words_tokens(gpt2):
+    words = ["Hello,", "world!", "Antidisestablishmentarianism", "is", "long."]
+    vecs = gpt2.word_vectors(words)
+    assert vecs.shape == (5, 32) and vecs.dtype == np.float32
+    assert np.isfinite(vecs).all()
+
+    # Reference: GPT-2 BPE of the sentence = concatenation of each word with a leading space
+    # (except the first); run the model once and average each word's token states.
+    groups = [gpt2.tokenizer(w if i == 0 else " " + w)["input_ids"] for i, w in enumerate(words)]
+    assert [len(g) for g in groups][:3] == [2, 2, len(groups[2])] and len(groups[2]) > 2
+    ids = [i for g in groups for i in g]
+    assert gpt2.tokenizer(" ".join(words))["input_ids"] == ids
+    with torch.inference_mode():
+        states = gpt2.model(input_ids=torch.tensor([ids])).last_hidden_state[0].numpy()
+    bounds = np.cumsum([0] + [len(g) for g in groups])
+    expected = np.stack([states[a:b].mean(axis=0) for a, b in itertools.pairwise(bounds)])
+    np.testing.assert_allclose(vecs, expected, atol=1e-5)
+
+
+def test_gpt2_vectors_are_contextual_and_deterministic(gpt2):
+    a = gpt2.word_vectors(["I", "sat", "by", "the", "river", "bank"])[-1]
+    b = gpt2.word_vectors(["I", "paid", "into", "my", "savings", "bank"])[-1]
+    assert np.abs(a - b).max() > 1e-3
+    again = gpt2.word_vectors(["I", "sat", "by", "the", "river", "bank"])[-1]
+    np.testing.assert_array_equal(a, again)
+
+
+def test_gpt2_long_text_is_windowed(tmp_path):
+    folder = make_tiny_gpt2(tmp_path / "short_ctx", n_positions=16)
+    backend = load_text_backend("gpt2", folder)
+    assert backend.max_tokens == 16
+    words = ("the cat sat on the mat and the dog ran in the park " * 10).split()  # 130 one-token words
+    assert len(backend.tokenizer(" ".join(words))["input_ids"]) == 130
+    vecs = backend.word_vectors(words)
+    assert vecs.shape == (130, 32) and np.isfinite(vecs).all()
+    assert (np.abs(vecs).sum(axis=1) > 0).all()
+    # GPT-2 is causal and the first window starts at the text's start, so the first half-window of
+    # tokens (8 here) must equal the states of the text cut to those words.
+    np.testing.assert_allclose(vecs[:8], backend.word_vectors(words[:8]), atol=1e-5)
+    # later tokens come from later windows with shifted positions: they differ from any 16-token run
+    assert np.abs(vecs[60] - vecs[8]).max() > 1e-4
+
+
+def test_empty_and_blank_words(gpt2):
+    assert gpt2.word_vectors([]).shape == (0, 32)
+    vecs = gpt2.word_vectors(["", "hello", "  "])
+    assert vecs.shape == (3, 32)
+    assert not vecs[0].any() and not vecs[2].any() and vecs[1].any()
+    np.testing.assert_allclose(vecs[1], gpt2.word_vectors(["hello"])[0], atol=1e-6)
+
+
+# ---------------------------------------------------------------- MiniLM (packaged, offline default)
+
+
+def test_minilm_vectors(minilm):
+    assert minilm.id == "minilm" and minilm.dim == 384 and minilm.max_tokens == 512
+    words = ["Hello,", "world.", "Unbelievable!", "ok"]
+    vecs = minilm.word_vectors(words)
+    assert vecs.shape == (4, 384) and vecs.dtype == np.float32
+    assert np.isfinite(vecs).all()
+    # token states, not one pooled sentence embedding: the words differ
+    assert np.abs(vecs[0] - vecs[1]).max() > 1e-2
+    # "Unbelievable!" is [unbelievable] [!]: its vector is the mean of two token states, not either one
+    enc = minilm.tokenizer(" ".join(words))
+    assert minilm.tokenizer.convert_ids_to_tokens(enc["input_ids"])[5:7] == ["unbelievable", "!"]
+    with torch.inference_mode():
+        states = minilm.model(input_ids=torch.tensor([enc["input_ids"]])).last_hidden_state[0].numpy()
+    np.testing.assert_allclose(vecs[2], states[5:7].mean(axis=0), atol=1e-5)
+    np.testing.assert_allclose(vecs[0], states[1:3].mean(axis=0), atol=1e-5)
+
+
+def test_minilm_contextual_and_cached(minilm):
+    a = minilm.word_vectors(["the", "river", "bank", "flooded"])[2]
+    b = minilm.word_vectors(["the", "bank", "approved", "my", "loan"])[1]
+    assert np.linalg.norm(a - b) > 0.1 * np.linalg.norm(a)
+    assert load_text_backend("minilm") is minilm
+    assert load_text_backend() is minilm
+
+
+def test_minilm_long_transcript(minilm):
+    words = ("we walked along the quiet river at dawn while the city slept " * 60).split()  # 720 words
+    t0 = time.perf_counter()
+    vecs = minilm.word_vectors(words)
+    assert time.perf_counter() - t0 < 20
+    assert vecs.shape == (720, 384) and np.isfinite(vecs).all()
+    assert (np.abs(vecs).sum(axis=1) > 0).all()
+
+
+# ---------------------------------------------------------------- missing weights
+
+
+def test_missing_weights_name_text_model_option(tmp_path):
+    with pytest.raises(
+        FacegenError, match="GPT-2 weights for 'openai-community/gpt2-not-here'.*--text-model PATH"
+    ):
+        load_text_backend("openai-community/gpt2-not-here")
+    with pytest.raises(FacegenError, match="not available offline.*--text-model PATH"):
+        load_text_backend("facegen-tests/no-such-model")
+    with pytest.raises(FacegenError, match="does not exist.*--text-model PATH"):
+        load_text_backend("gpt2", tmp_path / "nowhere")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FacegenError, match="cannot load a text model.*--text-model PATH"):
+        load_text_backend("gpt2", tmp_path / "empty")
+
+
+def test_gpt2_not_in_cache_names_text_model_option():
+    try:
+        backend = load_text_backend("gpt2")
+    except FacegenError as exc:
+        assert str(exc) == (
+            "GPT-2 weights for 'gpt2' are not available offline: pass --text-model PATH "
+            "to a local folder with a GPT-2 model"
+        )
+    else:  # real GPT-2 happens to be in the local HF cache
+        assert backend.dim == 768
+
+
+# ---------------------------------------------------------------- frame layout and smoothing
+
+
+def test_frame_layout_exact():
+    eye = np.eye(5, dtype=np.float32)
+    words = [
+        W("a", 0.00, 0.30),  # centres 0.05 0.15 0.25 -> frames 0 1 2
+        W("b", 0.50, 0.72),  # centres 0.55 0.65 (0.75 >= end) -> frames 5 6
+        W("c", 1.011, 1.019),  # no centre inside -> its midpoint's frame 10
+        W("d", 1.85, 2.50),  # runs past the end: frames 18 19
+        W("e", 3.00, 3.50),  # wholly after the last frame: dropped
+    ]
+    raw = frame_features(words, eye, num_frames=20, fps=10, window=(0, 0))
+    assert raw.shape == (20, 5) and raw.dtype == np.float32
+    owner = np.full(20, -1)
+    owner[[0, 1, 2]], owner[[5, 6]], owner[10], owner[[18, 19]] = 0, 1, 2, 3
+    expected = np.zeros((20, 5), np.float32)
+    expected[owner >= 0] = eye[owner[owner >= 0]]
+    np.testing.assert_array_equal(raw, expected)
+    # gaps are exactly zero before smoothing
+    assert not raw[[3, 4, 7, 8, 9, 11, 17]].any()
+
+    smoothed = frame_features(words, eye, num_frames=20, fps=10)
+    np.testing.assert_allclose(smoothed, naive_smooth(expected), atol=1e-6)
+    # frame 0: window frames 0..7 (8 present): three 'a' frames, two 'b' frames
+    np.testing.assert_allclose(smoothed[0], [3 / 8, 2 / 8, 0, 0, 0], atol=1e-6)
+    # frame 10: window 2..17 (16 frames): one 'a', two 'b', one 'c'
+    np.testing.assert_allclose(smoothed[10], [1 / 16, 2 / 16, 1 / 16, 0, 0], atol=1e-6)
+    # frame 19: window 11..19 (9 present): two 'd'
+    np.testing.assert_allclose(smoothed[19], [0, 0, 0, 2 / 9, 0], atol=1e-6)
+
+
+def test_frame_centre_rule_at_boundaries():
+    eye = np.eye(2, dtype=np.float32)
+    # at 25 fps frame t's centre is (t + 0.5) / 25: 0.02, 0.06, 0.10, ...
+    raw = frame_features([W("x", 0.02, 0.10), W("y", 0.10, 0.18)], eye, 6, 25.0, window=(0, 0))
+    np.testing.assert_array_equal(raw[:, 0], [1, 1, 0, 0, 0, 0])  # start inclusive, end exclusive
+    np.testing.assert_array_equal(raw[:, 1], [0, 0, 1, 1, 0, 0])
+
+
+def test_overlapping_words_later_wins():
+    eye = np.eye(2, dtype=np.float32)
+    raw = frame_features([W("x", 0.0, 0.4), W("y", 0.2, 0.3)], eye, 5, 10.0, window=(0, 0))
+    np.testing.assert_array_equal(raw.argmax(axis=1), [0, 0, 1, 0, 0])
+
+
+def test_smoothing_divides_by_frames_present():
+    x = np.full((30, 3), 2.5, np.float32)
+    np.testing.assert_allclose(smooth_frames(x), x, atol=1e-6)  # no fading at the ends
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=(40, 4)).astype(np.float32)
+    np.testing.assert_allclose(smooth_frames(y), naive_smooth(y), atol=1e-5)
+    np.testing.assert_allclose(smooth_frames(y, (3, 1)), naive_smooth(y, 3, 1), atol=1e-5)
+    assert smooth_frames(np.zeros((0, 4), np.float32)).shape == (0, 4)
+
+
+def test_ten_minutes_is_fast():
+    rng = np.random.default_rng(1)
+    n_words, dim, frames, fps = 1500, 384, 15_000, 25.0
+    starts = np.sort(rng.uniform(0, 600, n_words))
+    words = [W("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, n_words), strict=True)]
+    vectors = rng.normal(size=(n_words, dim)).astype(np.float32)
+    t0 = time.perf_counter()
+    feats = frame_features(words, vectors, frames, fps)
+    elapsed = time.perf_counter() - t0
+    assert feats.shape == (frames, dim) and feats.dtype == np.float32
+    assert elapsed < 3.0, elapsed
+    raw = frame_features(words, vectors, frames, fps, window=(0, 0))
+    for t in (0, 5, 7_777, 14_995, 14_999):
+        lo, hi = max(0, t - 8), min(frames, t + 8)
+        np.testing.assert_allclose(feats[t], raw[lo:hi].mean(axis=0), atol=1e-4)
+
+
+def test_frame_features_checks_vector_count():
+    with pytest.raises(ValueError):
+        frame_features([W("a", 0, 1)], np.zeros((2, 3), np.float32), 10, 25.0)
+
+
+def test_text_features_end_to_end(minilm):
+    words = [W("Hello", 0.10, 0.45), W("there,", 0.50, 0.80), W("friend.", 0.95, 1.40)]
+    feats = text_features(words, minilm, num_frames=75, fps=25.0)
+    assert feats.shape == (75, 384) and feats.dtype == np.float32
+    vecs = minilm.word_vectors([w.text for w in words])
+    np.testing.assert_allclose(feats, frame_features(words, vecs, 75, 25.0), atol=1e-6)
+    # last spoken frame is 34 (centre 1.38 s); frames from 34 + 8 + 1 on see only silence
+    assert feats[43:].any(axis=1).sum() == 0 and feats[42].any()
+    assert text_features([], minilm, 10, 25.0).shape == (10, 384)
+    z = zero_features(75, 384)
+    assert z.shape == (75, 384) and z.dtype == np.float32 and not z.any()
