@@ -306,7 +306,7 @@ def _decode(decoder, audio: np.ndarray) -> list[tuple[str, int, int, int]]:
     decoder.start_utt()
     decoder.process_raw(pcm, no_search=False, full_utt=True)
     decoder.end_utt()
-    return [(s.word, s.start_frame, s.end_frame, s.ascore) for s in decoder.seg()]
+    return [(s.word, s.start_frame, s.end_frame, s.ascore) for s in (decoder.seg() or [])]
 
 
 def _base(word: str) -> str:
