@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo test lint bench clean blender-venv node-deps
 
 setup: $(STAMP)
 
@@ -21,7 +21,7 @@ demo: $(STAMP)
 	$(BIN)/facegen animate examples/excellent_room.wav --text-file examples/excellent_room.txt --speaker 0 -o out/excellent_room.usda
 	$(BIN)/facegen validate out/excellent_room.usda
 
-test: $(STAMP)
+test: $(STAMP) blender-venv node-deps
 	$(BIN)/python -m pytest -q -m "not slow" tests
 	$(BIN)/python -m pytest -q -m slow tests
 
@@ -33,3 +33,38 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
+
+# Blender as a Python module for the DCC import test (tests/test_blender.py): PyPI bpy 5.0 needs
+# Python 3.11 and numpy < 2, so it gets its own venv, plus the X11/GL libraries it links (apt, as root).
+PYTHON311     ?= python3.11
+BLENDER_VENV  ?= .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.installed
+BLENDER_LIBS  := libgl1 libx11-6 libxext6 libxfixes3 libxi6 libxkbcommon0 libxrender1 libsm6
+
+blender-venv: $(BLENDER_STAMP)
+
+$(BLENDER_STAMP):
+	@missing=""; \
+	if command -v dpkg >/dev/null 2>&1; then \
+	  for p in $(BLENDER_LIBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; fi; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
+	  else echo "blender-venv: install these apt packages as root:$$missing"; fi; \
+	fi
+	$(PYTHON311) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/pip install -q --upgrade pip
+	$(BLENDER_VENV)/bin/pip install -q 'bpy==5.0.*' 'numpy<2'
+	touch $@
+
+# The Khronos glTF-Validator (npm) that `facegen validate` runs on .glb/.gltf files, pinned in
+# facegen/assets/package.json and installed beside the script that drives it.
+NODE_ASSETS := facegen/assets
+NODE_STAMP  := $(NODE_ASSETS)/node_modules/.facegen-installed
+
+node-deps: $(NODE_STAMP)
+
+$(NODE_STAMP): $(NODE_ASSETS)/package.json
+	cd $(NODE_ASSETS) && if [ -f package-lock.json ]; then npm ci --no-audit --no-fund --loglevel=error; \
+	  else npm install --no-audit --no-fund --loglevel=error; fi
+	touch $@

@@ -106,7 +106,7 @@ def animate(
         from facegen.text import load_text_backend, text_features
 
         progress(f"text features ({bundle.text_backend}) for {len(words)} words")
-        backend = load_text_backend(text_model or bundle.text_backend)
+        backend = load_text_backend(bundle.text_backend, text_model)
         if backend.dim != bundle.config.text_dim:
             raise FacegenError(
                 f"text model {backend.id} gives {backend.dim}-d features but the model was trained on "

@@ -63,14 +63,16 @@ def cli(debug: bool) -> None:
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.animate import animate as run
-    from facegen.exchange import check_output_path, write_animation
+    from facegen.atomic import check_writable
+    from facegen.exchange import format_module, write_animation
 
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
-    check_output_path(output)
+    format_module(output)  # an unknown extension or unwritable folder fails before any work
+    check_writable(output)
     progress = _progress(quiet)
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
                bundle=model, template=template, text_model=text_model, progress=progress)
-    written = write_animation(anim, output)
+    written = write_animation(anim, output, audio_source=audio)
     progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
 
 
@@ -131,8 +133,11 @@ def info(bundle, as_json):
 @click.option("--model", "-m", type=click.Path(dir_okay=False), help="Check against this bundle's template.")
 @click.option("--template", type=click.Path(dir_okay=False), help="Check against this mesh (PLY/OBJ).")
 @click.option("--fps", type=float, help="The frame rate the file must have.")
+@click.option("--audio", "audio_path", type=click.Path(dir_okay=False),
+              help="The audio the animation must match (default: the file's own/sidecar audio).")
+@click.option("--no-audio-required", is_flag=True, help="Do not fail when no audio is attached.")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable report.")
-def validate(file, model, template, fps, as_json):
+def validate(file, model, template, fps, audio_path, no_audio_required, as_json):
     """Check an animation FILE written by facegen (or another tool). Exit 1 when a check fails."""
     from facegen.validate import validate as run
 
@@ -147,7 +152,7 @@ def validate(file, model, template, fps, as_json):
         from facegen.mesh import read_mesh
 
         mesh = read_mesh(template)
-    report = run(file, template=mesh, fps=fps)
+    report = run(file, template=mesh, fps=fps, audio_path=audio_path, require_audio=not no_audio_required)
     click.echo(report.to_json() if as_json else report.to_text())
     sys.exit(0 if report.ok else 1)
 

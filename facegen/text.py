@@ -89,7 +89,7 @@ class TextBackend:
         states = self._encode(ids[:first], ids[first:last], ids[last:])
 
         start, end = offsets[first:last, 0], offsets[first:last, 1]
-        token_word = np.where(end > start, char_word[np.clip(start, 0, len(text) - 1)], -1)
+        token_word = np.where(end > start, char_word[np.clip(end - 1, 0, len(text) - 1)], -1)
         token_word[special[first:last]] = -1
         keep = token_word >= 0
         sums = np.zeros((len(words), self.dim), np.float64)

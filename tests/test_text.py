@@ -109,6 +109,14 @@ def test_gpt2_long_text_is_windowed(tmp_path):
     # GPT-2 is causal and the first window starts at the text's start, so the first half-window of
     # tokens (8 here) must equal the states of the text cut to those words.
     np.testing.assert_allclose(vecs[:8], backend.word_vectors(words[:8]), atol=1e-5)
+    # windows of 16 tokens start every 8 tokens; each token keeps the state from the window where it
+    # is farthest from an edge: token 12 from window 8..23 (4 from its start), token 60 from 56..71
+    ids = backend.tokenizer(" ".join(words))["input_ids"]
+    with torch.inference_mode():
+        for token, start in ((12, 8), (60, 56)):
+            window = torch.tensor([ids[start : start + 16]])
+            state = backend.model(input_ids=window).last_hidden_state[0, token - start].numpy()
+            np.testing.assert_allclose(vecs[token], state, atol=1e-5)
     # later tokens come from later windows with shifted positions: they differ from any 16-token run
     assert np.abs(vecs[60] - vecs[8]).max() > 1e-4
 

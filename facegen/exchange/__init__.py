@@ -1,7 +1,9 @@
 """Animation files: one module per format, chosen by the file's extension.
 
 Each format module defines
-    write(anim, path, **options) -> list[Path]     (the files written: the asset, then any sidecars)
+    write(anim, path, *, write_audio=True, audio_source=None, **format_options) -> list[Path]
+        (the asset's files: the asset, then any sidecars; every writer takes write_audio and audio_source,
+        the input audio file, which must never be overwritten by a sidecar)
 and, when the format can be read back,
     read(path, template=None, fps=None) -> Animation
 A new format is one new module plus its extensions in FORMATS.
@@ -66,7 +68,9 @@ def write_animation(anim: Animation, path: str | os.PathLike, **options) -> list
     return module.write(anim, path, **options)
 
 
-def read_animation(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:
+def read_animation(
+    path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None
+) -> Animation:
     """Read an animation file; `template` gives faces/rest pose where the file has none (.npy)."""
     module = format_module(path)
     if not hasattr(module, "read"):
@@ -92,3 +96,7 @@ def check_animation(anim: Animation) -> None:
         raise FacegenError(f"animation fps must be a positive number, got {anim.fps}")
     if anim.audio is not None and np.asarray(anim.audio).ndim != 1:
         raise FacegenError(f"animation audio must be mono (1-D), got shape {list(np.shape(anim.audio))}")
+    if anim.audio is not None and not (
+        isinstance(anim.sample_rate, int | np.integer) and anim.sample_rate > 0
+    ):
+        raise FacegenError(f"animation sample rate must be a positive integer, got {anim.sample_rate!r}")

@@ -20,17 +20,25 @@ EXTENSIONS = (".npy",)
 DEFAULT_FPS = 25.0
 
 
-def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True) -> list[Path]:
-    """Write the frames as [T, 3V] float32 and, when there is audio, a WAV sidecar; return the files."""
+def write(
+    anim: Animation,
+    path: str | os.PathLike,
+    *,
+    write_audio: bool = True,
+    audio_source: str | os.PathLike | None = None,
+) -> list[Path]:
+    """Write the frames as [T, 3V] float32 and, when there is audio, a WAV sidecar; return the files.
+
+    `audio_source` is the input audio file: when it is the sidecar itself it is kept, not overwritten.
+    """
     from facegen.exchange import check_animation
 
     check_animation(anim)
     path = Path(path)
     flat = np.ascontiguousarray(anim.vertices, dtype=np.float32).reshape(anim.num_frames, -1)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
-    with atomic_with_sidecar(path, audio, anim.sample_rate) as (tmp, wav):
-        with open(tmp, "wb") as f:
-            np.save(f, flat, allow_pickle=False)
+    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav), open(tmp, "wb") as f:
+        np.save(f, flat, allow_pickle=False)
     return [path] if wav is None else [path, wav]
 
 
@@ -53,7 +61,9 @@ def load_frames(path: str | os.PathLike) -> np.ndarray:
 def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:
     """Read a [T, 3V] .npy file with the template's faces; the WAV sidecar beside it becomes the audio."""
     if template is None:
-        raise FacegenError(f"{Path(path).name} stores only vertex positions: pass the template mesh (--template)")
+        raise FacegenError(
+            f"{Path(path).name} stores only vertex positions: pass the template mesh (--template)"
+        )
     data = load_frames(path)
     num_vertices = data.shape[1] // 3
     if num_vertices != template.num_vertices:

@@ -8,7 +8,8 @@ Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate)
                    normals face +Z, out of the face); `points` and `extent` have one time sample per
                    frame at time codes 0..T-1, and their default (non-animated) values hold the rest pose
     /Face/Audio    SpatialAudio: filePath @./out.wav@ (relative to the layer), auralMode nonSpatial,
-                   playbackMode onceFromStart, startTime 0, endTime = the audio's length in time codes
+                   playbackMode onceFromStart (play once from startTime to the audio's end); startTime
+                   is its schema fallback 0 (authoring a timecode forces usdc crate 0.9 and a warning)
 
 Stage metadata: timeCodesPerSecond = framesPerSecond = fps, startTimeCode 0, endTimeCode T-1, upAxis Y,
 metersPerUnit (`meters_per_unit`, default 0.2: BIWI coordinates are scaled to unit surface area, and a
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -44,11 +46,13 @@ def write(
     *,
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
     write_audio: bool = True,
+    audio_source: str | os.PathLike | None = None,
 ) -> list[Path]:
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
-    Returns the files written: the USD file, then the WAV when the animation has audio and
-    `write_audio` is true.
+    Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio`
+    is true. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
+    to `clip.usda`) it is referenced, not overwritten.
     """
     from pxr import Sdf, Usd
 
@@ -61,16 +65,17 @@ def write(
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
-    with atomic_with_sidecar(path, audio, anim.sample_rate) as (tmp, wav):
+    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
         layer = Sdf.Layer.CreateNew(str(tmp))
         if layer is None:
             raise FacegenError(f"cannot create USD layer {tmp}: check the output folder")
         stage = Usd.Stage.Open(layer)
         _author_stage(stage, anim, meters_per_unit, f"./{wav.name}" if wav is not None else None)
+        del stage
         _author_samples(layer, anim)
         if not layer.Save():
             raise FacegenError(f"cannot write {path}: check free disk space and permissions")
-        del stage, layer
+        del layer
     return [path] if wav is None else [path, wav]
 
 
@@ -105,9 +110,9 @@ def _author_stage(stage, anim: Animation, meters_per_unit: float, audio_asset: s
         sound.CreateFilePathAttr(Sdf.AssetPath(audio_asset))
         sound.CreateAuralModeAttr(UsdMedia.Tokens.nonSpatial)
         sound.CreatePlaybackModeAttr(UsdMedia.Tokens.onceFromStart)
-        sound.CreateStartTimeAttr(Sdf.TimeCode(0.0))
-        audio_frames = len(anim.audio) / anim.sample_rate * anim.fps
-        sound.CreateEndTimeAttr(Sdf.TimeCode(float(audio_frames)))
+        # startTime/endTime keep their schema fallbacks: startTime 0 is where the audio starts, and
+        # onceFromStart ignores endTime. Authoring a timecode value would force usdc crate 0.9.0 and a
+        # pxr warning on every write.
 
     stage.GetRootLayer().customLayerData = {
         "facegen": {
@@ -120,17 +125,20 @@ def _author_stage(stage, anim: Animation, meters_per_unit: float, audio_asset: s
 
 
 def _author_samples(layer, anim: Animation) -> None:
-    """One `points` and one `extent` time sample per frame, written straight into the layer."""
-    from pxr import Sdf, Vt
+    """One `points` and one `extent` time sample per frame, written straight into the layer.
+
+    Called with no stage open on the layer: a stage listening to the layer slows this loop by half.
+    """
+    from pxr import Sdf, UsdGeom, Vt
 
     vertices = np.ascontiguousarray(anim.vertices, dtype=np.float32)
-    extents = np.ascontiguousarray(np.stack([vertices.min(axis=1), vertices.max(axis=1)], axis=1))
     points = Sdf.Path(MESH_PATH).AppendProperty("points")
     extent = Sdf.Path(MESH_PATH).AppendProperty("extent")
     with Sdf.ChangeBlock():
         for i in range(len(vertices)):
-            layer.SetTimeSample(points, float(i), Vt.Vec3fArray.FromNumpy(vertices[i]))
-            layer.SetTimeSample(extent, float(i), Vt.Vec3fArray.FromNumpy(extents[i]))
+            frame = Vt.Vec3fArray.FromNumpy(vertices[i])
+            layer.SetTimeSample(points, float(i), frame)
+            layer.SetTimeSample(extent, float(i), UsdGeom.PointBased.ComputeExtent(frame))
 
 
 def _usd_dict(values: dict) -> dict:
@@ -197,10 +205,19 @@ def open_stage(path: str | os.PathLike):
             cached.Reload(force=True)
         stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
     except Tf.ErrorException as exc:
-        raise FacegenError(f"cannot open USD file {path} ({str(exc).strip()}): pass a valid USD file") from exc
+        raise FacegenError(
+            f"cannot open USD file {path} ({_tf_message(exc)}): pass a valid USD file"
+        ) from exc
     if stage is None:
         raise FacegenError(f"cannot open USD file {path}: pass a valid USD file")
     return stage
+
+
+def _tf_message(exc: Exception) -> str:
+    """The first message of a pxr error, on one line (pxr's text holds C++ function names and files)."""
+    text = str(exc)
+    found = re.findall(r" : '([^']*)'", text)
+    return found[0] if found else " ".join(text.split())[:200]
 
 
 def find_mesh(stage):
@@ -283,7 +300,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     if mesh is None:
         raise FacegenError(f"{path} has no UsdGeom.Mesh: pass a facegen USD animation")
     faces = mesh_faces(mesh)
-    times, frames = points_samples(mesh)
+    _, frames = points_samples(mesh)
     if not frames:
         raise FacegenError(f"{path}: mesh {mesh.GetPath()} has no points time samples: nothing to read")
     if len({len(f) for f in frames}) != 1:

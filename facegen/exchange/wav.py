@@ -37,18 +37,33 @@ def read_wav(path: str | os.PathLike) -> tuple[np.ndarray, int]:
     try:
         data, sample_rate = sf.read(str(path), dtype="float32", always_2d=True)
     except (OSError, RuntimeError) as exc:  # sf.LibsndfileError is a RuntimeError
-        raise FacegenError(f"cannot read audio file {path} ({exc}): pass a readable WAV/FLAC/OGG file") from exc
+        raise FacegenError(
+            f"cannot read audio file {path} ({exc}): pass a readable WAV/FLAC/OGG file"
+        ) from exc
     return data.mean(axis=1).astype(np.float32), int(sample_rate)
+
+
+def is_same_file(a: str | os.PathLike | None, b: str | os.PathLike) -> bool:
+    """True when both paths exist and name the same file."""
+    try:
+        return a is not None and os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 @contextlib.contextmanager
 def atomic_with_sidecar(
-    target: str | os.PathLike, audio: np.ndarray | None, sample_rate: int
+    target: str | os.PathLike,
+    audio: np.ndarray | None,
+    sample_rate: int,
+    source: str | os.PathLike | None = None,
 ) -> Iterator[tuple[Path, Path | None]]:
     """Yield (temporary main path, final sidecar path or None) for writing `target` with its audio.
 
     The sidecar WAV is written first to its own temporary file; both files are renamed into place
-    only when the caller's block succeeds. On failure neither file is left behind.
+    only when the caller's block succeeds. On failure neither file is left behind. When `source` (the
+    input audio file) is the sidecar itself (`clip.wav` animated to `clip.usda`), it is kept as it is
+    and referenced instead of being overwritten.
     """
     target = Path(target)
     if audio is None:
@@ -58,6 +73,10 @@ def atomic_with_sidecar(
     wav = sidecar_path(target)
     if wav == target:
         raise FacegenError(f"output {target} would be overwritten by its own audio sidecar: use another name")
+    if is_same_file(source, wav):
+        with atomic_path(target) as tmp:
+            yield tmp, wav
+        return
     placed = False
     try:
         with atomic_path(target) as tmp:

@@ -48,7 +48,8 @@ class _Event(ctypes.Structure):
     ]
 
 
-_Callback = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_short), ctypes.c_int, ctypes.POINTER(_Event))
+_Callback = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_short), ctypes.c_int,
+                             ctypes.POINTER(_Event))
 
 
 @dataclass
@@ -182,7 +183,7 @@ def synthesize(text: str, voice: str = "en-us", pitch: int = 50, rate: int = 170
         raise FacegenError(f"libespeak-ng could not synthesise the text (status {status}): simplify the text")
     audio = (np.concatenate(chunks) if chunks else np.zeros(0, np.int16)).astype(np.float32) / 32768.0
     native = es.sample_rate
-    words, phones = _timings(text, events, native, len(audio) / native)
+    words, phones = _timings(text, events, native, len(audio) / native, name)
     if sample_rate is not None and sample_rate != native:
         import soxr
 
@@ -190,51 +191,83 @@ def synthesize(text: str, voice: str = "en-us", pitch: int = 50, rate: int = 170
     return Speech(audio, sample_rate or native, words, phones)
 
 
-def _timings(text: str, events: list[tuple[int, int, int, str]], rate: int,
-             duration: float) -> tuple[list[Word], list[Phone]]:
-    """Turn espeak's WORD and PHONEME events into words (mapped to `text`) and phones."""
+def _timings(text: str, events: list[tuple[int, int, int, str]], rate: int, duration: float,
+             voice: str) -> tuple[list[Word], list[Phone]]:
+    """Turn espeak's WORD and PHONEME events into words (mapped to the words of `text`) and phones."""
     tokens = [(m.start(), m.end(), strip_edges(m.group())) for m in re.finditer(r"\S+", text)]
-    # espeak's sub-words ("forty", "two" for "42"): token index, start and end time, phones
-    subs: list[dict] = []
-    all_phones: list[tuple[str, float, int]] = []  # (name, start, sub index or -1 for a pause)
+    tokens = [t for t in tokens if t[2]]
+    # espeak's sub-words: [token index, start time, [(phone, start, end), ...], end time]
+    subs: list[list] = []
+    stream: list[tuple[str, float, int]] = []  # every phoneme event: (name, time, sub or -1 for a pause)
     token = 0
     for kind, sample, position, name in events:
         t = sample / rate
-        if kind == _EVENT_WORD:
+        if kind == _EVENT_WORD and tokens:
             char = position - 1  # espeak's text positions count characters from 1
-            while token + 1 < len(tokens) and tokens[token + 1][0] <= char:
+            # the word holding that character, else the next one (positions can point at a space)
+            while token + 1 < len(tokens) and (tokens[token + 1][0] <= char or tokens[token][1] <= char):
                 token += 1
-            subs.append({"token": token, "start": t, "end": None})
-        elif kind == _EVENT_PHONEME:
-            pause = name in _PAUSES or name.startswith("_")
-            all_phones.append((name, t, -1 if pause or not subs else len(subs) - 1))
-    # a sub-word ends where the next pause or the next sub-word begins, else at the end of the audio
-    ends: dict[int, float] = {}
-    for i, (_, start, sub) in enumerate(all_phones):
-        nxt = all_phones[i + 1][1] if i + 1 < len(all_phones) else duration
+            subs.append([token, t, [], None])
+        elif kind == _EVENT_PHONEME and any(c.isalnum() or c in "@_" for c in name):  # not ";" markers
+            pause = name.startswith("_")
+            stream.append((name, t, -1 if pause or not subs else len(subs) - 1))
+    for i, (name, start, sub) in enumerate(stream):
+        end = stream[i + 1][1] if i + 1 < len(stream) else duration
         if sub >= 0:
-            ends[sub] = nxt
+            subs[sub][2].append((name, start, end))
     for i, sub in enumerate(subs):
-        limit = subs[i + 1]["start"] if i + 1 < len(subs) else duration
-        sub["end"] = min(ends.get(i, limit), limit)
+        limit = subs[i + 1][1] if i + 1 < len(subs) else duration
+        sub[3] = min(sub[2][-1][2], limit) if sub[2] else limit
+
+    # espeak sometimes speaks two words as one ("from the"): give the silent words their share of phones
+    owner: dict[int, int] = {}  # eventless token → sub that spoke it
+    voiced = {sub[0] for sub in subs}
+    for tok in range(len(tokens)):
+        if tok not in voiced and subs:
+            before = [i for i, sub in enumerate(subs) if sub[0] < tok]
+            owner[tok] = before[-1] if before else 0
+    pieces: list[tuple[int, float, float, list]] = []  # (token, start, end, phones)
+    for i, (tok, start, phones, end) in enumerate(subs):
+        extra = sorted(t for t, o in owner.items() if o == i)
+        if not extra:
+            pieces.append((tok, start, end, phones))
+            continue
+        group = sorted([tok] + extra)
+        counts = [len(phonemize(tokens[t][2], voice)) for t in group]
+        for t, part in zip(group, _split(phones, counts, group.index(tok))):
+            if part:
+                part_end = end if part is phones or part[-1] is phones[-1] else part[-1][2]
+                pieces.append((t, start if t == tok and part[0] is phones[0] else part[0][1], part_end, part))
+    pieces.sort(key=lambda p: p[1])
 
     words: list[Word] = []
-    token_word: dict[int, int] = {}
-    sub_word: list[int] = []
-    for sub in subs:
-        tok = sub["token"]
-        if tok in token_word:
-            words[token_word[tok]].end = sub["end"]
+    phone_list: list[Phone] = []
+    index: dict[int, int] = {}
+    for tok, start, end, phones in pieces:
+        if tok in index:
+            words[index[tok]].end = max(words[index[tok]].end, end)
         else:
-            token_word[tok] = len(words)
-            words.append(Word(tokens[tok][2], sub["start"], sub["end"]))
-        sub_word.append(token_word[tok])
-    phones = []
-    for i, (name, start, sub) in enumerate(all_phones):
-        if sub >= 0:
-            end = all_phones[i + 1][1] if i + 1 < len(all_phones) else duration
-            phones.append(Phone(name, start, end, sub_word[sub]))
-    return words, phones
+            index[tok] = len(words)
+            words.append(Word(tokens[tok][2], start, end))
+        phone_list += [Phone(name, s, e, index[tok]) for name, s, e in phones]
+    return words, phone_list
+
+
+def _split(phones: list, counts: list[int], own: int) -> list[list]:
+    """Split one sub-word's phones between the words it spoke, by their phone counts in order."""
+    counts = list(counts)
+    others = sum(c for i, c in enumerate(counts) if i != own)
+    if len(phones) - others >= 1:
+        counts[own] = len(phones) - others
+    else:  # counts do not fit: share in proportion
+        total = max(sum(counts), 1)
+        counts = [max(1, round(c * len(phones) / total)) if c else 0 for c in counts]
+        counts[own] += len(phones) - sum(counts)
+    parts, i = [], 0
+    for c in counts:
+        parts.append(phones[i:i + max(c, 0)])
+        i += max(c, 0)
+    return parts
 
 
 def phonemize(word: str, voice: str = "en-us") -> list[str]:

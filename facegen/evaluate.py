@@ -1,0 +1,229 @@
+"""Evaluation on a dataset split: LVE and FDD as the community computes them, and vertex errors.
+
+For a sequence with ground truth Y [T, V, 3], prediction Ŷ = template + model offsets, and the
+subject's template M [V, 3] (all in mesh units: the BIWI normalisation makes the face's total surface
+area 1):
+
+- **LVE** (lip vertex error; FaceFormer / CodeTalker ``cal_metric.py``): per frame, the maximum over the
+  lip-region vertices (regions/lve.txt) of the squared L2 error ‖ŷ_v − y_v‖²; the mean over all frames
+  of all sequences. Unit: squared mesh units.
+- **FDD** (upper-face dynamics deviation; CodeTalker): for each upper-face vertex (regions/fdd.txt), the
+  standard deviation over time (population, ddof 0) of the squared displacement norm ‖y_v,t − m_v‖²;
+  per sequence, the mean over those vertices of ground truth minus prediction, std(Y) − std(Ŷ); the
+  mean over sequences. Signed (positive: the prediction moves less than the truth), as in CodeTalker.
+  Unit: squared mesh units.
+- **mean error**: the L2 distance ‖ŷ_v − y_v‖ averaged over all vertices and all frames (mesh units);
+  **upper-face error** the same over the upper-face region; **lower-face error** over every vertex *not*
+  in the upper-face region (lips, jaw, chin, cheeks, …); **lip error** over the lip region.
+  Frame-weighted: the mean over all frames of all sequences, like LVE.
+
+Conditioning: sequences of a split of training subjects (train, val, test-a) are predicted with their
+own speaker's one-hot vector. Test B's subjects were never seen, so — as the paper and the community
+do — each of their sequences is predicted once for every training speaker; every (sequence, speaker)
+pair counts as one sequence in the means above (per-sequence rows show the mean over speakers).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from facegen.data import Dataset, Splits, Warn, check_split, warn_stderr
+from facegen.errors import FacegenError
+
+METRICS = ("lve", "fdd", "mean_error", "upper_error", "lower_error", "lip_error")
+UNITS = {
+    "lve": "squared mesh units (mean over frames of the max over lip vertices of the squared L2 error)",
+    "fdd": "squared mesh units (upper face: std over time of the squared displacement norm, truth - prediction)",
+    "mean_error": "mesh units (mean L2 distance per vertex, all vertices)",
+    "upper_error": "mesh units (mean L2 distance per vertex, upper-face region fdd.txt)",
+    "lower_error": "mesh units (mean L2 distance per vertex, all vertices outside the upper-face region)",
+    "lip_error": "mesh units (mean L2 distance per vertex, lip region lve.txt)",
+}
+
+
+def sequence_metrics(pred: np.ndarray, gt: np.ndarray, template: np.ndarray, lips: np.ndarray,
+                     upper: np.ndarray) -> dict:
+    """The metrics of one sequence: pred, gt [T, V, 3]; template [V, 3]; lips, upper vertex indices.
+
+    Returns frames, lve (mean over this sequence's frames), lve_sum (for pooling), fdd and the
+    per-vertex mean errors (see the module docstring).
+    """
+    pred = np.asarray(pred, np.float64)
+    gt = np.asarray(gt, np.float64)
+    template = np.asarray(template, np.float64)
+    if pred.shape != gt.shape or pred.ndim != 3 or gt.shape[1:] != template.shape:
+        raise ValueError(f"shapes differ: prediction {pred.shape}, truth {gt.shape}, template {template.shape}")
+    err2 = np.square(pred - gt).sum(axis=2)  # [T, V] squared L2 error per vertex
+    lve_frames = err2[:, lips].max(axis=1)
+    motion_gt = np.square(gt[:, upper] - template[upper]).sum(axis=2)  # [T, U] squared displacement norms
+    motion_pred = np.square(pred[:, upper] - template[upper]).sum(axis=2)
+    fdd = float(np.mean(motion_gt.std(axis=0) - motion_pred.std(axis=0)))
+    dist = np.sqrt(err2)
+    lower = np.setdiff1d(np.arange(gt.shape[1]), upper)
+    return {
+        "frames": int(gt.shape[0]),
+        "lve": float(lve_frames.mean()),
+        "lve_sum": float(lve_frames.sum()),
+        "fdd": fdd,
+        "mean_error": float(dist.mean()),
+        "upper_error": float(dist[:, upper].mean()),
+        "lower_error": float(dist[:, lower].mean()) if lower.size else float("nan"),
+        "lip_error": float(dist[:, lips].mean()),
+    }
+
+
+def pool(rows: list[dict]) -> dict:
+    """Pool per-(sequence, condition) metrics: LVE and errors over all frames, FDD over sequences."""
+    frames = sum(r["frames"] for r in rows)
+    if not rows or frames == 0:
+        return {k: float("nan") for k in METRICS} | {"frames": 0}
+    out = {"frames": frames, "lve": sum(r["lve_sum"] for r in rows) / frames,
+           "fdd": float(np.mean([r["fdd"] for r in rows]))}
+    for k in ("mean_error", "upper_error", "lower_error", "lip_error"):
+        out[k] = sum(r[k] * r["frames"] for r in rows) / frames
+    return out
+
+
+def _region(dataset: Dataset, bundle, name: str, file: str, num_vertices: int) -> np.ndarray:
+    idx = dataset.regions.get(name)
+    if idx is None:
+        idx = bundle.template.regions.get(name)
+    if idx is None or len(idx) == 0:
+        raise FacegenError(f"no {name} region: put {file} in {dataset.root}/regions/ (the community's region "
+                           "files) or use a bundle that has it")
+    idx = np.asarray(idx, np.int64)
+    if idx.min() < 0 or idx.max() >= num_vertices:
+        raise FacegenError(f"the {name} region ({file}) has indices outside the {num_vertices} vertices")
+    return idx
+
+
+def evaluate(
+    bundle_path: str | os.PathLike | None,
+    data_root: str | os.PathLike,
+    split: str = "test-a",
+    *,
+    splits: Splits | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    text_model_path: str | os.PathLike | None = None,
+    device: str = "cpu",
+    on_bad: str = "skip",
+    quiet: bool = False,
+    warn: Warn | None = warn_stderr,
+) -> dict:
+    """Evaluate a model bundle on a split of the dataset at `data_root` (see the module docstring).
+
+    `splits` defaults to the split the bundle was trained with (its provenance), else the community's
+    with the bundle's speakers as training subjects. Returns a JSON-ready dict: bundle, data, split,
+    conditioning, metrics (pooled), units, per_sequence rows, skipped sequences.
+    """
+    from tqdm import tqdm
+
+    from facegen.bundle import load_bundle
+    from facegen.train import resolve_device
+
+    check_split(split)
+    say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    bundle = load_bundle(bundle_path)
+    dev = resolve_device(device, say)
+    if splits is None:
+        known = bundle.provenance.get("split")
+        splits = Splits.from_dict(known) if known else Splits(train_subjects=tuple(bundle.speakers),
+                                                                   test_subjects=())
+    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, warn=warn)
+    cfg = bundle.config
+    backend = None
+    if cfg.uses_text:
+        from facegen.text import load_text_backend
+
+        backend = load_text_backend(bundle.text_backend, text_model_path)
+        if backend.dim != cfg.text_dim:
+            raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was trained "
+                               f"on {cfg.text_dim}-d ({bundle.text_backend}): pass the matching --text-model")
+    sequences = dataset.split(split, splits)
+    if split != "test-b":
+        strangers = sorted({s.subject for s in sequences} - set(bundle.speakers))
+        if strangers:
+            raise FacegenError(f"subjects {' '.join(strangers)} of split {split} are not speakers of the model "
+                               f"({', '.join(bundle.speakers)}): evaluate them as test-b")
+    items = dataset.load(sequences, bundle.features, bundle.mel_filters, backend, progress=not quiet)
+    if not items:
+        raise FacegenError(f"no usable sequence of split {split} in {dataset.root}: check the files named above")
+    num_vertices = bundle.template.num_vertices
+    if items[0].template.shape[0] != num_vertices:
+        raise FacegenError(f"the dataset's meshes have {items[0].template.shape[0]} vertices but the model "
+                           f"{num_vertices}: evaluate on a dataset with the model's topology")
+    lips = _region(dataset, bundle, "lips", "lve.txt", num_vertices)
+    upper = _region(dataset, bundle, "upper_face", "fdd.txt", num_vertices)
+
+    model = bundle.model.to(dev).eval()
+    pooled_rows: list[dict] = []
+    per_sequence: list[dict] = []
+    for item in tqdm(items, desc=f"evaluate {split}", unit="seq", disable=quiet, file=sys.stderr, leave=False):
+        conditions = list(range(len(bundle.speakers))) if split == "test-b" else \
+            [bundle.speakers.index(item.subject)]
+        gt = item.vertices().reshape(item.num_frames, num_vertices, 3)
+        rows = []
+        with torch.inference_mode():
+            mel = torch.from_numpy(item.mel)[None].to(dev)
+            text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
+            for c in conditions:
+                speaker = torch.zeros(1, len(bundle.speakers), device=dev)
+                speaker[0, c] = 1.0
+                offsets = model(mel, text, speaker)[0].cpu().numpy()
+                pred = item.template[None] + offsets
+                rows.append(sequence_metrics(pred, gt, item.template, lips, upper))
+        pooled_rows += rows
+        mean = pool(rows)
+        mean["fdd"] = float(np.mean([r["fdd"] for r in rows]))
+        per_sequence.append({"name": item.name, "subject": item.subject,
+                             "condition": bundle.speakers[conditions[0]] if len(conditions) == 1
+                             else f"mean of {len(conditions)} speakers",
+                             **{k: mean[k] for k in ("frames",) + METRICS}})
+    metrics = pool(pooled_rows)
+    return {
+        "bundle": str(bundle.path),
+        "data": str(dataset.root),
+        "split": split,
+        "sequences": len(items),
+        "conditioning": (f"each of the {len(bundle.speakers)} training speakers ({', '.join(bundle.speakers)}), "
+                         "averaged" if split == "test-b" else "the sequence's own speaker"),
+        "metrics": {k: metrics[k] for k in ("frames",) + METRICS},
+        "units": dict(UNITS),
+        "per_sequence": per_sequence,
+        "skipped": [list(s) for s in dataset.skipped],
+    }
+
+
+def format_table(result: dict) -> str:
+    """The result as a readable table (per sequence, then all)."""
+    head = f"{'sequence':<12}{'frames':>7}  {'LVE':>10} {'FDD':>11} {'mean err':>10} {'upper err':>10} " \
+           f"{'lower err':>10} {'lip err':>10}"
+
+    def line(name: str, r: dict) -> str:
+        return (f"{name:<12}{r['frames']:>7}  {r['lve']:>10.4e} {r['fdd']:>11.4e} {r['mean_error']:>10.4e} "
+                f"{r['upper_error']:>10.4e} {r['lower_error']:>10.4e} {r['lip_error']:>10.4e}")
+
+    title = (f"model {result['bundle']} on {result['data']}, split {result['split']}: {result['sequences']} "
+             f"sequences, conditioned on {result['conditioning']}")
+    lines = [title, "", head, "-" * len(head)]
+    lines += [line(r["name"], r) for r in result["per_sequence"]]
+    units = ("LVE, FDD: squared mesh units; errors: mean L2 distance per vertex in mesh units "
+             "(lower face = all vertices outside the upper-face region)")
+    lines += ["-" * len(head), line("all", result["metrics"]), "", units]
+    if result["skipped"]:
+        lines.append(f"skipped {len(result['skipped'])} sequences: " +
+                     ", ".join(f"{n} ({r})" for n, r in result["skipped"]))
+    return "\n".join(lines)
+
+
+def write_json(result: dict, path: str | os.PathLike) -> None:
+    from facegen.atomic import atomic_path
+
+    with atomic_path(Path(path)) as tmp:
+        tmp.write_text(json.dumps(result, indent=2))

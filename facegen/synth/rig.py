@@ -1,0 +1,528 @@
+"""A motion rig on the procedural face, and the animation curves that drive it.
+
+`Rig(mesh)` precomputes smooth per-vertex weights (falloffs of the graph distance over the mesh from
+the named regions of facegen.synth.face) and poses the face from channel weights [T, C]:
+
+* linear offsets (lip shapes, brows, cheeks),
+* the jaw: a rotation about the hinge axis, the lower lip and lower mouth cavity with it,
+* the lids: rotations about each eyeball's centre (blink closes each lid column exactly),
+* lip_close: the lips meet along the slit whatever the jaw does (p, b, m).
+
+The curves come from timings: `viseme_curves` (lips and jaw from the phones, with coarticulation),
+`expression_curves` (upper face from emotional words only) and `blink_curves` (random blinks). The
+upper-face curves never look at the phones: the audio carries no emotion, only the text does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from facegen.errors import FacegenError
+from facegen.mesh import Mesh
+from facegen.synth.lexicon import LEXICON, Emotion, lookup
+
+LOWER_CHANNELS = ("jaw_open", "lip_close", "lip_round", "lip_wide", "lip_funnel", "lower_lip_tuck",
+                  "upper_lip_raise")
+UPPER_CHANNELS = ("brow_raise", "brow_frown", "lid_widen", "cheek_raise")
+BLINK_CHANNELS = ("blink",)
+CHANNELS = LOWER_CHANNELS + UPPER_CHANNELS + BLINK_CHANNELS
+
+# expression classes of the lexicon -> upper-face channel amounts
+EXPRESSIONS: dict[str, dict[str, float]] = {
+    "surprise": {"brow_raise": 1.0, "lid_widen": 0.4},
+    "anger": {"brow_frown": 1.0},
+    "sadness": {"brow_frown": 0.55, "brow_raise": 0.25},
+    "fear": {"lid_widen": 1.0, "brow_raise": 0.5},
+    "awe": {"lid_widen": 0.7, "brow_raise": 0.7},
+    "joy": {"cheek_raise": 1.0},
+}
+
+EYE_SPACING_CM = 6.3  # distance between the eyeball centres of the canonical face
+JAW_MAX_ANGLE = 0.33  # rad at jaw_open = 1 (about 2 cm between the lips)
+_REQUIRED = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
+             "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin",
+             "right_lower_lid_margin", "brows", "forehead", "cheeks")
+
+
+def _falloff(d: np.ndarray, radius: float) -> np.ndarray:
+    """1 at distance 0, smoothly 0 at `radius` and beyond (inf -> 0)."""
+    t = np.clip(1.0 - np.nan_to_num(d, posinf=1e9) / radius, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _rotate_x(p: np.ndarray, centre: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotate points p [..., 3] about the x-parallel axis through `centre` by `angle` [...] (rad);
+    positive angles move points in front of the centre (+z) downwards (-y)."""
+    c, s = np.cos(angle), np.sin(angle)
+    y, z = p[..., 1] - centre[..., 1], p[..., 2] - centre[..., 2]
+    out = p.copy()
+    out[..., 1] = centre[..., 1] + y * c - z * s
+    out[..., 2] = centre[..., 2] + y * s + z * c
+    return out
+
+
+def _fit_centre(points: np.ndarray) -> np.ndarray:
+    """Centre of the axis-aligned ellipsoid through `points` (least squares)."""
+    p = np.asarray(points, np.float64)
+    a = np.concatenate([p**2, p], 1)
+    coef, *_ = np.linalg.lstsq(a, np.ones(len(p)), rcond=None)
+    return -coef[3:] / (2 * coef[:3])
+
+
+class Rig:
+    """Deformers on a face made by facegen.synth.face (any speaker: the regions carry the layout)."""
+
+    channels: tuple[str, ...] = CHANNELS
+
+    def __init__(self, mesh: Mesh) -> None:
+        missing = [r for r in _REQUIRED if r not in mesh.regions]
+        if missing:
+            raise FacegenError(f"the mesh lacks the rig regions {', '.join(missing)}: "
+                               "use a face from facegen.synth.face (make_face or speaker_face)")
+        self.template = np.asarray(mesh.vertices, np.float64)
+        self.faces = np.asarray(mesh.faces)
+        reg = {k: np.asarray(v, np.int64) for k, v in mesh.regions.items()}
+        V = len(self.template)
+        t = self.template
+        # scale: mesh units per cm, from the distance between the eyeball centres
+        self.eye_centres = np.stack([_fit_centre(t[reg["left_eyeball"]]), _fit_centre(t[reg["right_eyeball"]])])
+        cm = float(np.linalg.norm(self.eye_centres[0] - self.eye_centres[1])) / EYE_SPACING_CM
+        self.cm = cm
+        graph = self._graph()
+
+        def dist(sources: np.ndarray, sources_out: bool = False):
+            d, _, src = dijkstra(graph, directed=False, indices=sources, min_only=True,
+                                 return_predecessors=True)
+            return (d / cm, src) if sources_out else d / cm
+
+        mu, ml = reg["mouth_upper_margin"], reg["mouth_lower_margin"]
+        d_up, src_up = dist(mu, True)
+        d_lo, src_lo = dist(ml, True)
+        mouth_centre = (t[mu].mean(0) + t[ml].mean(0)) / 2
+        X = (t[:, 0] - mouth_centre[0]) / cm  # cm across the mouth
+        half = (t[mu[-1], 0] - t[mu[0], 0]) / 2 / cm  # mouth half-width, cm
+        upper_side = d_up < d_lo
+        d_m = np.minimum(d_up, d_lo)
+        lat = np.sqrt(np.clip(1 - (X / (half + 0.2)) ** 2, 0, 1))
+
+        off: dict[str, np.ndarray] = {}
+
+        def field(dx=0.0, dy=0.0, dz=0.0) -> np.ndarray:
+            return np.stack([np.broadcast_to(dx, (V,)), np.broadcast_to(dy, (V,)),
+                             np.broadcast_to(dz, (V,))], 1) * cm
+
+        near = _falloff(d_m, 0.9)  # the lips themselves
+        peri = _falloff(d_m, 2.4)  # lips and the skin around them
+        w_up = _falloff(d_up, 1.5) * upper_side
+        w_lo = _falloff(d_lo, 1.5) * ~upper_side
+        sgn = np.where(upper_side, 1.0, -1.0)
+        opening = np.clip(1 - (X / half) ** 2, 0, 1)
+        off["lip_close"] = field(dz=-0.12 * _falloff(d_m, 0.6))  # pressed (the seal itself is below)
+        Xc = np.clip(X, -half, half)
+        off["lip_round"] = field(dx=-0.42 * Xc * peri, dy=sgn * 0.22 * near * opening ** 0.7,
+                                 dz=0.75 * peri**2)
+        off["lip_wide"] = field(dx=0.24 * Xc * peri, dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near,
+                                dz=-0.18 * peri)
+        off["lip_funnel"] = field(dx=-0.18 * Xc * peri, dy=sgn * 0.3 * near * opening**0.3,
+                                  dz=0.5 * peri**2 + 0.15 * near)
+        off["lower_lip_tuck"] = field(dy=0.38 * w_lo * lat + 0.06 * w_up * lat, dz=-0.5 * w_lo * lat)
+        off["upper_lip_raise"] = field(dy=0.32 * w_up * lat, dz=0.12 * w_up * lat)
+
+        # upper face
+        d_brow = dist(reg["brows"])
+        w_brow = _falloff(d_brow, 1.3)
+        Y = (t[:, 1] - t[reg["brows"], 1].mean()) / cm  # cm above the brows
+        above = _falloff(d_brow, 5.0) * np.clip(Y / 1.2, 0, 1) ** 2 * (3 - 2 * np.clip(Y / 1.2, 0, 1))
+        ramp = np.clip((Y - 0.6) / 0.8, 0, 1)
+        wrinkle = 0.05 * np.sin(2 * np.pi * (Y - 0.6) / 1.1) * _falloff(d_brow, 4.5) * ramp * ramp * (3 - 2 * ramp)
+        off["brow_raise"] = field(dy=0.6 * np.maximum(w_brow, 0.75 * above), dz=wrinkle)
+        Xe = t[:, 0] / cm
+        inner = np.clip(1.3 - np.abs(Xe) / 4.0, 0.3, 1.0)
+        off["brow_frown"] = field(dx=-0.35 * np.sign(Xe) * inner * w_brow, dy=-0.32 * w_brow * inner,
+                                  dz=0.1 * w_brow)
+        d_corner = dist(np.array([mu[0], mu[-1], ml[0], ml[-1]]))
+        w_corner = _falloff(d_corner, 2.6)
+        cheeks = reg["cheeks"]
+        centres = [cheeks[np.argmin(np.linalg.norm(t[cheeks] - t[cheeks[side]].mean(0), axis=1))]
+                   for side in (t[cheeks, 0] > 0, t[cheeks, 0] < 0)]
+        w_cheek = _falloff(dist(np.array(centres)), 3.2)
+        lids_lo = np.concatenate([reg["left_lower_lid_margin"], reg["right_lower_lid_margin"]])
+        lids_up = np.concatenate([reg["left_upper_lid_margin"], reg["right_upper_lid_margin"]])
+        d_lid_up, src_lid_up = dist(lids_up, True)
+        d_lid_lo, src_lid_lo = dist(lids_lo, True)
+        lower_lid = d_lid_lo < d_lid_up
+        w_squint = _falloff(d_lid_lo, 0.9) * lower_lid
+        off["cheek_raise"] = field(dx=0.4 * np.sign(X) * w_corner, dy=0.45 * w_corner + 0.3 * w_cheek
+                                   + 0.12 * w_squint, dz=-0.12 * w_corner + 0.25 * w_cheek)
+        self._linear = [c for c in CHANNELS if c in off]
+        self._offsets = np.stack([off[c] for c in self._linear]).reshape(len(self._linear), -1).astype(np.float32)
+        self._linear_index = np.array([CHANNELS.index(c) for c in self._linear])
+
+        # jaw: rigid rotation of the jaw region, smooth falloff around it
+        hinge = reg["jaw_hinge"]
+        self.hinge = t[hinge].mean(0)
+        # 1 deep inside the jaw region, 1/2 on its border, 0 beyond; the slit is a hard border
+        in_jaw = np.zeros(V, bool)
+        in_jaw[reg["jaw"]] = True
+        free = ~in_jaw & ~((d_up < 0.6) & upper_side)  # not the jaw, not the upper lip at the slit
+        ramp = 1.8
+        w_jaw = np.where(in_jaw, 0.5 + 0.5 * (1 - _falloff(dist(np.nonzero(free)[0]), ramp)),
+                         0.5 * _falloff(dist(reg["jaw"]), ramp))
+        w_jaw[(d_up < 0.6) & upper_side & (opening > 0)] = 0.0
+        self._jaw_idx = np.nonzero(w_jaw > 0)[0]
+        self._jaw_w = w_jaw[self._jaw_idx]
+
+        # lids: per-column closing angles about each eyeball centre
+        def angle(p: np.ndarray, c: np.ndarray) -> np.ndarray:
+            return np.arctan2(p[..., 1] - c[..., 1], p[..., 2] - c[..., 2])
+
+        side_of = np.zeros(V, np.int64)
+        side_of[reg["right_upper_lid_margin"]] = 1
+        side_of[reg["right_lower_lid_margin"]] = 1
+        pairs = []
+        for s in ("left", "right"):
+            pairs.append((reg[f"{s}_upper_lid_margin"], reg[f"{s}_lower_lid_margin"]))
+        close_angle = np.zeros(V)
+        for up, lo in pairs:
+            c = self.eye_centres[side_of[up[0]]]
+            a = angle(t[up], c) - angle(t[lo], c)
+            close_angle[up] = a
+            close_angle[lo] = a
+        w_lid_up = _falloff(d_lid_up, 1.0) * ~lower_lid
+        w_lid_lo = _falloff(d_lid_lo, 0.6) * lower_lid
+        src = np.where(lower_lid, src_lid_lo, src_lid_up)
+        lid_idx = np.nonzero((w_lid_up > 0) | (w_lid_lo > 0))[0]
+        self._lid_idx = lid_idx
+        self._lid_upper = ~lower_lid[lid_idx]
+        self._lid_w = np.where(self._lid_upper, w_lid_up[lid_idx], w_lid_lo[lid_idx])
+        self._lid_alpha = close_angle[src[lid_idx]]
+        self._lid_centre = self.eye_centres[side_of[src[lid_idx]]]
+
+        # lip seal: every lip vertex follows its nearest margin vertex towards the meeting line
+        seal_w = _falloff(d_m, 1.1)
+        seal_idx = np.nonzero(seal_w > 0)[0]
+        self._seal_idx = seal_idx
+        self._seal_w = seal_w[seal_idx]
+        col_of = np.full(V, -1)
+        col_of[mu] = np.arange(len(mu))
+        col_of[ml] = np.arange(len(ml))
+        src_m = np.where(upper_side, src_up, src_lo)
+        self._seal_col = col_of[src_m[seal_idx]]
+        self._seal_upper = upper_side[seal_idx]
+        self._mu, self._ml = mu, ml
+
+    def _graph(self):
+        f = self.faces
+        e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        e = np.unique(np.sort(e, 1), axis=0)
+        w = np.linalg.norm(self.template[e[:, 0]] - self.template[e[:, 1]], axis=1) + 1e-12
+        n = len(self.template)
+        return coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+
+    def pose(self, weights: np.ndarray) -> np.ndarray:
+        """Vertex positions [T, V, 3] (float32) for channel weights [T, C] in `channels` order."""
+        w = np.asarray(weights, np.float32)
+        if w.ndim != 2 or w.shape[1] != len(CHANNELS):
+            raise FacegenError(f"rig weights must have shape [frames, {len(CHANNELS)}], got {w.shape}")
+        T = len(w)
+        V = len(self.template)
+        ch = {c: w[:, i] for i, c in enumerate(CHANNELS)}
+        pos = self.template.astype(np.float32)[None] + (w[:, self._linear_index] @ self._offsets).reshape(T, V, 3)
+        # jaw
+        ang = ch["jaw_open"][:, None] * JAW_MAX_ANGLE * self._jaw_w[None, :]
+        j = self._jaw_idx
+        pos[:, j] = _rotate_x(pos[:, j], self.hinge[None, None, :].astype(np.float32), ang)
+        # lids: blink closes, widen opens (less while blinking), frown narrows a little
+        blink = ch["blink"][:, None]
+        widen = ch["lid_widen"][:, None] * (1 - blink)
+        frown = ch["brow_frown"][:, None] * (1 - blink)
+        up = self._lid_upper[None, :]
+        theta = np.where(up, blink * 0.85 * self._lid_alpha - widen * 0.2 + frown * 0.05,
+                         -blink * 0.15 * self._lid_alpha + widen * 0.07)
+        theta = theta * self._lid_w[None, :]
+        li = self._lid_idx
+        pos[:, li] = _rotate_x(pos[:, li], self._lid_centre[None].astype(np.float32), theta.astype(np.float32))
+        # lip seal
+        close = ch["lip_close"]
+        if np.any(close > 0):
+            pu, pl = pos[:, self._mu], pos[:, self._ml]
+            target = pu + 0.45 * (pl - pu)
+            delta = np.where(self._seal_upper[None, :, None], (target - pu)[:, self._seal_col],
+                             (target - pl)[:, self._seal_col])
+            pos[:, self._seal_idx] += (close[:, None] * self._seal_w[None, :])[..., None] * delta
+        return pos
+
+
+# ---------------------------------------------------------------------------------------------- style
+@dataclass(frozen=True)
+class SpeakerStyle:
+    """How one synthetic speaker moves."""
+
+    articulation: float = 1.0  # overall amplitude of the mouth
+    jaw_gain: float = 1.0  # jaw versus lips usage
+    lip_gain: float = 1.0
+    coarticulation: float = 1.0  # time scale of the dominance functions (larger: smoother)
+    expressiveness: float = 1.0  # gain of the upper-face responses
+    onset: float = 0.15  # s, ramp of an expression response
+    decay: float = 0.8  # s, fade of an expression response
+    blink_interval: tuple[float, float] = (2.0, 6.0)  # s between blinks
+    blink_duration: tuple[float, float] = (0.15, 0.25)  # s
+
+    @classmethod
+    def for_speaker(cls, index: int) -> SpeakerStyle:
+        """The style of speaker `index` (deterministic)."""
+        u = np.frombuffer(hashlib.sha256(f"facegen-style-{index}".encode()).digest(), np.uint8) / 255.0
+        lo = 2.0 + 1.0 * u[7]
+        return cls(articulation=0.8 + 0.4 * u[0], jaw_gain=0.75 + 0.5 * u[1], lip_gain=0.75 + 0.5 * u[2],
+                   coarticulation=0.8 + 0.45 * u[3], expressiveness=0.6 + 0.8 * u[4], onset=0.1 + 0.1 * u[5],
+                   decay=0.6 + 0.4 * u[6], blink_interval=(lo, lo + 2.0 + 1.0 * u[8]))
+
+
+# ------------------------------------------------------------------------------------------- visemes
+def _v(**kw: float) -> np.ndarray:
+    return np.array([kw.get(c, 0.0) for c in LOWER_CHANNELS])
+
+
+# targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme
+VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
+    "rest": (_v(), 1.0, 1.0),
+    "PBM": (_v(jaw_open=0.04, lip_close=1.0), 3.0, 8.0),
+    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 2.0, 6.0),
+    "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.5, 0.8),
+    "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 2.0, 1.2),
+    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 1.5, 4.0),
+    "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 1.0, 0.3),
+    "L": (_v(jaw_open=0.2), 1.0, 0.3),
+    "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 1.0, 2.0),
+    "KG": (_v(jaw_open=0.2), 0.8, 0.3),
+    "H": (_v(jaw_open=0.25), 0.3, 0.2),
+    "W": (_v(jaw_open=0.05, lip_round=1.0), 1.5, 5.0),
+    "Y": (_v(jaw_open=0.1, lip_wide=0.5), 1.0, 1.5),
+    "AA": (_v(jaw_open=0.65, lip_wide=0.1), 2.5, 1.0),
+    "AE": (_v(jaw_open=0.55, lip_wide=0.3), 2.5, 1.0),
+    "AH": (_v(jaw_open=0.35), 2.0, 0.8),
+    "ER": (_v(jaw_open=0.3, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
+    "EH": (_v(jaw_open=0.45, lip_wide=0.35), 2.0, 1.2),
+    "IY": (_v(jaw_open=0.12, lip_wide=0.85), 2.0, 2.0),
+    "IH": (_v(jaw_open=0.2, lip_wide=0.55), 2.0, 1.5),
+    "AO": (_v(jaw_open=0.55, lip_round=0.55), 2.0, 2.0),
+    "OW": (_v(jaw_open=0.4, lip_round=0.7), 2.0, 2.5),
+    "UH": (_v(jaw_open=0.2, lip_round=0.6), 2.0, 2.5),
+    "UW": (_v(jaw_open=0.1, lip_round=1.0), 2.0, 3.5),
+}
+
+# espeak-ng phoneme mnemonics (English voices) -> viseme sequence (diphthongs: two or three parts)
+PHONEME_VISEMES: dict[str, tuple[str, ...]] = {
+    **{p: ("PBM",) for p in ("p", "b", "m", "m-")},
+    **{p: ("FV",) for p in ("f", "v")},
+    **{p: ("TH",) for p in ("T", "D")},
+    **{p: ("SZ",) for p in ("s", "z", "z#")},
+    **{p: ("SH",) for p in ("S", "Z", "tS", "dZ", "S;", "Z;")},
+    **{p: ("TDN",) for p in ("t", "d", "n", "t#", "d#", "n-", "t2", "d2", "?", "*", "t^")},
+    **{p: ("L",) for p in ("l", "l/", "L", "@L", "l-", "l#")},
+    **{p: ("R",) for p in ("r", "r-", "r/", "R", "3", "@r", "r#")},
+    **{p: ("KG",) for p in ("k", "g", "N", "x", "C", "k#", "g#")},
+    **{p: ("H",) for p in ("h", "h#")},
+    **{p: ("W",) for p in ("w", "hw", "W")},
+    **{p: ("Y",) for p in ("j", "j#")},
+    **{p: ("AA",) for p in ("a", "A:", "A", "aa", "a#", "A#", "a2", "0", "V", "A@")},
+    **{p: ("AE",) for p in ("&", "a1")},
+    **{p: ("AH",) for p in ("@", "@2", "@5", "@1", "@-", "@#", "V#")},
+    **{p: ("ER",) for p in ("3:", "3:r", "@r")},
+    **{p: ("EH",) for p in ("E", "e", "E2", "E#")},
+    **{p: ("IY",) for p in ("i:", "i", "i#")},
+    **{p: ("IH",) for p in ("I", "I#", "I2", "I2#", "y", "Y")},
+    **{p: ("AO",) for p in ("O:", "O", "O2", "O#", "0#", "Q")},
+    **{p: ("OW",) for p in ("o", "o:")},
+    **{p: ("UH",) for p in ("U", "U#")},
+    **{p: ("UW",) for p in ("u:", "u", "U:", "u#")},
+    "aI": ("AA", "IH"), "aU": ("AA", "UH"), "eI": ("EH", "IH"), "oU": ("OW", "UW"), "OI": ("AO", "IH"),
+    "aI@": ("AA", "IH", "AH"), "aU@": ("AA", "UH", "AH"), "aI3": ("AA", "IH", "ER"), "aU3": ("AA", "UH", "ER"),
+    "i@": ("IY", "AH"), "i@3": ("IY", "ER"), "e@": ("EH", "AH"), "U@": ("UH", "AH"), "A@r": ("AA", "ER"),
+    "O@": ("AO", "AH"), "o@": ("OW", "AH"), "e@r": ("EH", "ER"), "0u": ("OW", "UW"), "@U": ("AH", "UW"),
+    "eI#": ("EH", "IH"), "IR": ("IH", "ER"), "VR": ("AH", "ER"),
+}
+_STRESS = str.maketrans("", "", "'\",%=!")
+
+
+def phone_visemes(mnemonic: str) -> tuple[str, ...]:
+    """The viseme sequence of one espeak phoneme mnemonic; unknown phonemes are neutral ("rest")."""
+    name = mnemonic.translate(_STRESS).strip()
+    if name.startswith("_") or not name:
+        return ("rest",)
+    for key in (name, name.rstrip("0123456789#-;"), name[:2], name[:1]):
+        if key in PHONEME_VISEMES:
+            return PHONEME_VISEMES[key]
+    return ("rest",)
+
+
+def _phone_fields(phone) -> tuple[str, float, float]:
+    if hasattr(phone, "text"):
+        return str(phone.text), float(phone.start), float(phone.end)
+    text, start, end = phone[0], phone[1], phone[2]
+    return str(text), float(start), float(end)
+
+
+_RATE = 200.0  # Hz, the time grid the curves are built on before averaging into frames
+
+
+def _frame_average(values: np.ndarray, num_frames: int, fps: float) -> np.ndarray:
+    """Average a curve sampled at _RATE over each frame's window [k - 1/2, k + 1/2] / fps."""
+    n = len(values)
+    t = np.arange(n) / _RATE
+    frame = np.clip(np.floor(t * fps + 0.5).astype(int), 0, num_frames - 1)
+    out = np.zeros((num_frames,) + values.shape[1:])
+    np.add.at(out, frame, values)
+    counts = np.bincount(frame, minlength=num_frames).astype(float)
+    return out / np.maximum(counts, 1)[:, None]
+
+
+def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
+                  style: SpeakerStyle | None = None) -> np.ndarray:
+    """Lips and jaw [num_frames, len(LOWER_CHANNELS)] from phone timings (espeak mnemonics, seconds).
+
+    Coarticulation: Cohen-Massaro dominance functions (each segment's target is blended with its
+    neighbours', weighted by dominances that fall off exponentially in time, with more anticipation
+    than carry-over). Silence is the rest pose. During p, b and m the lips are closed (lip_close = 1)
+    and the jaw nearly shut; a bilabial shorter than a frame still closes the lips on its nearest frame.
+    """
+    style = style or SpeakerStyle()
+    duration = num_frames / fps
+    n = int(np.ceil(duration * _RATE)) + 1
+    t = np.arange(n) / _RATE
+    segments: list[tuple[float, float, str]] = []
+    cursor = 0.0
+    bilabial: list[tuple[float, float]] = []
+    for ph in phones:
+        text, start, end = _phone_fields(ph)
+        if end <= start:
+            continue
+        if start - cursor > 0.02:
+            segments.append((cursor, start, "rest"))
+        parts = phone_visemes(text)
+        step = (end - start) / len(parts)
+        for k, vis in enumerate(parts):
+            segments.append((start + k * step, start + (k + 1) * step, vis))
+        if parts == ("PBM",):
+            bilabial.append((start, end))
+        cursor = max(cursor, end)
+    if duration - cursor > 0.0:
+        segments.append((cursor, max(duration, cursor + 0.1), "rest"))
+
+    C = len(LOWER_CHANNELS)
+    lips = np.array([c != "jaw_open" for c in LOWER_CHANNELS])
+    num = np.zeros((n, C))
+    den = np.full((n, C), 1e-9)
+    ahead, behind = 0.07 * style.coarticulation, 0.045 * style.coarticulation
+    for start, end, vis in segments:
+        target, dom_jaw, dom_lips = VISEMES[vis]
+        centre, half = (start + end) / 2, (end - start) / 2
+        dt = t - centre
+        away = np.maximum(np.abs(dt) - half * 0.6, 0.0)
+        rate = np.where(dt < 0, 1 / ahead, 1 / behind)  # before the segment: anticipation
+        d = np.exp(-away * rate)[:, None] * np.where(lips, dom_lips, dom_jaw)[None, :]
+        num += d * target[None, :]
+        den += d
+    curves = num / den
+
+    # bilabial closure: lips closed over the phone, jaw nearly shut
+    idx = {c: i for i, c in enumerate(LOWER_CHANNELS)}
+    for start, end in bilabial:
+        env = np.clip(np.minimum(t - start + 0.03, end + 0.03 - t) / 0.03, 0, 1)
+        curves[:, idx["lip_close"]] = np.maximum(curves[:, idx["lip_close"]], env)
+        jaw = curves[:, idx["jaw_open"]]
+        curves[:, idx["jaw_open"]] = jaw * (1 - env) + np.minimum(jaw, 0.06) * env
+        for c in ("lip_wide", "lip_funnel", "lower_lip_tuck"):
+            curves[:, idx[c]] *= 1 - 0.7 * env
+
+    # speaker style
+    gains = np.array([style.jaw_gain if c == "jaw_open" else (1.0 if c == "lip_close" else style.lip_gain)
+                      for c in LOWER_CHANNELS]) * np.array(
+        [1.0 if c == "lip_close" else style.articulation for c in LOWER_CHANNELS])
+    curves = np.clip(curves * gains[None, :], 0.0, 1.0)
+    out = _frame_average(curves, num_frames, fps)
+    # every bilabial closes the lips on at least its nearest frame (even when shorter than a frame)
+    frame_t = np.arange(num_frames) / fps
+    for start, end in bilabial:
+        inside = np.nonzero((frame_t >= start) & (frame_t <= end))[0]
+        if len(inside) == 0:
+            inside = np.array([int(np.clip(round((start + end) / 2 * fps), 0, num_frames - 1))])
+        out[inside, idx["lip_close"]] = 1.0
+        out[inside, idx["jaw_open"]] = np.minimum(out[inside, idx["jaw_open"]], 0.06)
+    return out.astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------- expression
+def expression_response(t: np.ndarray, start: float, end: float, onset: float, decay: float) -> np.ndarray:
+    """Shape of one response in [0, 1]: ramps up over `onset` from the word's start, holds through the
+    word, then fades to 0 over `decay` seconds."""
+    rise = np.clip((t - start) / onset, 0, 1)
+    rise = rise * rise * (3 - 2 * rise)
+    hold_end = max(end, start + onset)
+    fall = np.clip((t - hold_end) / decay, 0, 1)
+    fall = 1 - fall * fall * (3 - 2 * fall)
+    return np.where(t < start, 0.0, rise * fall)
+
+
+def expression_curves(words: Sequence, num_frames: int, fps: float = 25.0,
+                      lexicon: dict[str, Emotion] | None = None,
+                      style: SpeakerStyle | None = None) -> np.ndarray:
+    """Upper face [num_frames, len(UPPER_CHANNELS)] from the meaning of the words alone.
+
+    Every occurrence of a lexicon word (`words`: objects with .text, .start, .end in seconds) starts a
+    response of its class (EXPRESSIONS) scaled by its intensity and the speaker's expressiveness;
+    overlapping responses combine by maximum. Words outside the lexicon leave the upper face at rest.
+    """
+    style = style or SpeakerStyle()
+    table = LEXICON if lexicon is None else lexicon
+    t = np.arange(num_frames) / fps
+    out = np.zeros((num_frames, len(UPPER_CHANNELS)))
+    for word in words:
+        text, start, end = (word.text, word.start, word.end) if hasattr(word, "text") else word[:3]
+        emotion = lookup(str(text), table)
+        if emotion is None:
+            continue
+        shape = expression_response(t, float(start), float(end), style.onset, style.decay)
+        gain = emotion.intensity * style.expressiveness
+        for channel, amount in EXPRESSIONS[emotion.cls].items():
+            k = UPPER_CHANNELS.index(channel)
+            out[:, k] = np.maximum(out[:, k], np.clip(gain * amount, 0, 1) * shape)
+    return out.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------- blinks
+def blink_curves(num_frames: int, fps: float, rng: np.random.Generator,
+                 style: SpeakerStyle | None = None) -> np.ndarray:
+    """Random blinks [num_frames, 1]: every `style.blink_interval` seconds (uniform), each lasting
+    `style.blink_duration` (closing 30%, closed 30%, opening 40% of it)."""
+    style = style or SpeakerStyle()
+    t = np.arange(num_frames) / fps
+    out = np.zeros(num_frames)
+    lo, hi = style.blink_interval
+    when = float(rng.uniform(0.2, hi))
+    end = num_frames / fps
+    while when < end:
+        dur = float(rng.uniform(*style.blink_duration))
+        u = (t - when) / dur
+        up = np.clip(u / 0.3, 0, 1)
+        down = np.clip((1 - u) / 0.4, 0, 1)
+        shape = np.where((u >= 0) & (u <= 1), np.minimum(up, down), 0.0)
+        out = np.maximum(out, shape * shape * (3 - 2 * shape))
+        when += dur + float(rng.uniform(lo, hi))
+    return out[:, None].astype(np.float32)
+
+
+def motion_curves(phones: Sequence, words: Sequence, num_frames: int, fps: float = 25.0,
+                  style: SpeakerStyle | None = None, rng: np.random.Generator | None = None,
+                  lexicon: dict[str, Emotion] | None = None) -> np.ndarray:
+    """All rig channels [num_frames, len(CHANNELS)]: visemes, expressions and blinks, in CHANNELS order."""
+    rng = rng if rng is not None else np.random.default_rng(0)
+    return np.concatenate([viseme_curves(phones, num_frames, fps, style),
+                           expression_curves(words, num_frames, fps, lexicon, style),
+                           blink_curves(num_frames, fps, rng, style)], 1)

@@ -1,0 +1,476 @@
+"""Training: the paper's setup on a dataset in the BIWI community layout, resumable and deterministic.
+
+Defaults follow the paper: mean squared error over all vertex coordinates, Adam with a constant
+learning rate of 1e-4, one sequence per step, 100 epochs. `batch_size` > 1 averages the gradients of
+that many sequences per optimizer step (sequences are never padded).
+
+Every epoch: the validation loss is computed, the weights with the lowest validation loss so far are
+kept (without a validation split, the lowest training loss), and one checkpoint file is written
+atomically (safetensors + JSON metadata: weights, best weights, Adam state, RNG state, epoch, loss
+history — no pickle), together with the loss curves (loss.csv, loss.png). `resume=True` continues from
+that checkpoint, so a killed run loses at most the epoch in progress, and the result is identical to an
+uninterrupted run: the order of sequences in epoch e depends only on (seed, e).
+
+On CPU the run is deterministic for a given seed and thread count (torch.use_deterministic_algorithms).
+The model written is the best checkpoint, as a bundle (facegen.bundle) with the dataset's BIWI.ply as
+its template, the training subjects as its speakers, and provenance (data, epochs, best epoch, losses,
+training time, split).
+
+Speed on CPU: fused Adam, gradients freed rather than zeroed, denormals flushed (Adam's second moments
+of the zero-initialised output layer otherwise fall into slow denormal arithmetic), features computed
+once and cached, targets read from memory-mapped .npy files as contiguous float32.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from facegen.atomic import atomic_path
+from facegen.data import Dataset, Item, Splits, Warn, warn_stderr
+from facegen.errors import FacegenError
+from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig
+
+CHECKPOINT = "checkpoint.safetensors"
+CHECKPOINT_VERSION = 1
+MIN_MEL_STD = 1.0  # dB: a mel band that barely varies in training is not amplified
+
+
+@dataclass
+class TrainResult:
+    bundle: Path
+    checkpoint_dir: Path
+    epochs: int  # epochs completed in total (including resumed ones)
+    epochs_run: int  # epochs run by this call
+    best_epoch: int
+    best_loss: float  # validation loss of the best epoch (training loss without a validation split)
+    history: list[dict] = field(default_factory=list)
+    seconds: float = 0.0  # training time in total, over all resumed runs
+    curves_csv: Path | None = None
+    curves_png: Path | None = None
+    train_sequences: int = 0
+    val_sequences: int = 0
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+
+def resolve_device(device: str, say: Warn) -> torch.device:
+    """"auto" → cuda when available (else a message and cpu); "cuda" without CUDA → FacegenError."""
+    if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
+        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda")
+    if device == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda")
+        say("no CUDA GPU available: training on the CPU")
+        return torch.device("cpu")
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise FacegenError("--device cuda was asked for but torch sees no CUDA GPU: use --device cpu (or auto)")
+    return torch.device(device)
+
+
+@contextlib.contextmanager
+def _torch_settings(threads: int | None) -> Iterator[None]:
+    """Deterministic algorithms, flushed denormals and the thread count, restored afterwards."""
+    deterministic = torch.are_deterministic_algorithms_enabled()
+    warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
+    old_threads = torch.get_num_threads()
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    torch.set_flush_denormal(True)
+    if threads:
+        torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(deterministic, warn_only=warn_only)
+        torch.set_flush_denormal(False)
+        torch.set_num_threads(old_threads)
+
+
+def _round_robin(names: list, key) -> list:
+    """Interleave items by subject (F2_e01, F3_e01, …) so a prefix covers every subject."""
+    groups: dict[str, list] = {}
+    for x in names:
+        groups.setdefault(key(x), []).append(x)
+    out = []
+    for i in range(max((len(g) for g in groups.values()), default=0)):
+        out += [g[i] for g in groups.values() if i < len(g)]
+    return out
+
+
+class _Batch:
+    """One sequence's tensors on the device (features kept; the target is read per step)."""
+
+    def __init__(self, item: Item, speaker: int, num_speakers: int, device: torch.device) -> None:
+        self.item = item
+        self.mel = torch.from_numpy(item.mel)[None].to(device)
+        self.text = None if item.text is None else torch.from_numpy(item.text)[None].to(device)
+        self.speaker = torch.zeros(1, num_speakers, device=device)
+        self.speaker[0, speaker] = 1.0
+        self.template = item.template.reshape(-1)
+        self.device = device
+
+    def target(self) -> torch.Tensor:
+        """Ground-truth offsets from the subject's template, [T, 3V] float32."""
+        v = self.item.vertices()
+        v -= self.template
+        return torch.from_numpy(v).to(self.device)
+
+    def loss(self, model: FaceModel) -> torch.Tensor:
+        out = model(self.mel, self.text, self.speaker)
+        return torch.nn.functional.mse_loss(out.view(out.shape[1], -1), self.target())
+
+
+class _NonFinite(Exception):
+    def __init__(self, name: str, value: float) -> None:
+        super().__init__(name, value)
+        self.name, self.value = name, value
+
+
+def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
+    """The order of the training sequences in `epoch`: a function of (seed, epoch) only."""
+    return np.random.default_rng([seed, epoch]).permutation(n)
+
+
+def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: list[_Batch], order, batch_size: int = 1,
+                bar=None) -> float:
+    """One pass over `batches` in `order`, one optimizer step per `batch_size` sequences; the mean loss.
+
+    Raises _NonFinite at the first NaN or infinite loss (before it reaches the weights).
+    """
+    model.train()
+    optimizer.zero_grad(set_to_none=True)
+    total = 0.0
+    for step, index in enumerate(order):
+        batch = batches[index]
+        loss = batch.loss(model)
+        value = float(loss)
+        if not math.isfinite(value):
+            raise _NonFinite(batch.item.name, value)
+        (loss / batch_size if batch_size > 1 else loss).backward()
+        if (step + 1) % batch_size == 0 or step + 1 == len(order):
+            optimizer.step()
+            optimizer.zero_grad(set_to_none=True)
+        total += value
+        if bar is not None:
+            bar.update(1)
+            if step % 8 == 0:
+                bar.set_postfix(loss=f"{total / (step + 1):.3e}")
+    return total / max(len(order), 1)
+
+
+def _validate(model: FaceModel, batches: list[_Batch]) -> float:
+    if not batches:
+        return float("nan")
+    model.eval()
+    with torch.no_grad():
+        losses = [float(b.loss(model)) for b in batches]
+    model.train()
+    return float(np.mean(losses))
+
+
+# ------------------------------------------------------------------------------------- checkpoints
+def _state_tensors(prefix: str, state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    return {f"{prefix}.{k}": v.detach().cpu().contiguous().clone() for k, v in state.items()}
+
+
+def save_checkpoint(path: Path, model: FaceModel, best: dict[str, torch.Tensor], optimizer: torch.optim.Optimizer,
+                    meta: dict) -> None:
+    """Weights, best weights, Adam state and RNG state in one safetensors file, written atomically."""
+    from safetensors.torch import save_file
+
+    tensors = _state_tensors("model", model.state_dict())
+    tensors.update(_state_tensors("best", best))
+    opt = optimizer.state_dict()
+    for pid, state in opt["state"].items():
+        for key, value in state.items():
+            if torch.is_tensor(value):
+                tensors[f"optim.{pid}.{key}"] = value.detach().cpu().contiguous().clone()
+    tensors["rng.torch"] = torch.get_rng_state()
+    groups = [{k: list(v) if isinstance(v, tuple) else v for k, v in g.items()} for g in opt["param_groups"]]
+    meta = dict(meta, version=CHECKPOINT_VERSION, param_groups=groups)
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata={"facegen_checkpoint": json.dumps(meta)})
+
+
+def load_checkpoint(path: Path) -> tuple[dict[str, torch.Tensor], dict]:
+    from safetensors import safe_open
+    from safetensors.torch import load_file
+
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = json.loads((f.metadata() or {})["facegen_checkpoint"])
+        tensors = load_file(str(path))
+    except Exception as exc:  # safetensors has its own error types
+        raise FacegenError(f"checkpoint {path} is unreadable ({exc}): delete it and train without --resume") from exc
+    if meta.get("version", 0) > CHECKPOINT_VERSION:
+        raise FacegenError(f"checkpoint {path} was written by a newer facegen: upgrade facegen")
+    return tensors, meta
+
+
+def _restore(tensors: dict[str, torch.Tensor], meta: dict, model: FaceModel,
+             optimizer: torch.optim.Optimizer) -> dict[str, torch.Tensor]:
+    def part(prefix: str) -> dict[str, torch.Tensor]:
+        n = len(prefix) + 1
+        return {k[n:]: v for k, v in tensors.items() if k.startswith(prefix + ".")}
+
+    model.load_state_dict(part("model"))
+    state: dict[int, dict] = {}
+    for key, value in part("optim").items():
+        pid, name = key.split(".", 1)
+        state.setdefault(int(pid), {})[name] = value
+    groups = [{k: tuple(v) if k == "betas" else v for k, v in g.items()} for g in meta["param_groups"]]
+    optimizer.load_state_dict({"state": state, "param_groups": groups})
+    torch.set_rng_state(tensors["rng.torch"])
+    return part("best")
+
+
+# ------------------------------------------------------------------------------------------ curves
+def write_curves(history: list[dict], folder: Path) -> tuple[Path, Path | None]:
+    """loss.csv and (when matplotlib is installed) loss.png in `folder`."""
+    csv_path = folder / "loss.csv"
+    with atomic_path(csv_path) as tmp, open(tmp, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["epoch", "train_loss", "val_loss", "seconds"])
+        for h in history:
+            writer.writerow([h["epoch"], f"{h['train_loss']:.6e}", f"{h['val_loss']:.6e}", f"{h['seconds']:.2f}"])
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from matplotlib import pyplot as plt
+    except ImportError:
+        return csv_path, None
+    png_path = folder / "loss.png"
+    epochs = [h["epoch"] for h in history]
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    ax.plot(epochs, [h["train_loss"] for h in history], label="training", marker="." if len(epochs) < 30 else None)
+    val = [h["val_loss"] for h in history]
+    if not all(math.isnan(v) for v in val):
+        ax.plot(epochs, val, label="validation", marker="." if len(epochs) < 30 else None)
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("MSE (mesh units²)")
+    ax.set_yscale("log")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    with atomic_path(png_path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return csv_path, png_path
+
+
+# ----------------------------------------------------------------------------------------- training
+def default_checkpoint_dir(out_bundle: str | os.PathLike) -> Path:
+    """model.safetensors → model.ckpt/ beside it."""
+    out = Path(out_bundle)
+    return out.with_name(out.stem + ".ckpt")
+
+
+def train(
+    data_root: str | os.PathLike,
+    out_bundle: str | os.PathLike,
+    *,
+    text_backend: str = "minilm",
+    text_model_path: str | os.PathLike | None = None,
+    modalities: str = "both",
+    fusion: str = "tensor",
+    epochs: int = 100,
+    lr: float = 1e-4,
+    batch_size: int = 1,
+    seed: int = 0,
+    device: str = "auto",
+    resume: bool = False,
+    splits: Splits | None = None,
+    checkpoint_dir: str | os.PathLike | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    max_sequences: int | None = None,
+    on_bad: str = "skip",
+    model_options: dict | None = None,
+    threads: int | None = None,
+    quiet: bool = False,
+    half: bool = False,
+    warn: Warn | None = warn_stderr,
+) -> TrainResult:
+    """Train a model on the dataset at `data_root` and write the best checkpoint as a bundle.
+
+    `modalities` both|audio|text and `fusion` tensor|concat choose the network (facegen.model);
+    `text_backend` (+ `text_model_path`) the language model (facegen.text). `max_sequences` caps the
+    training and validation sequences (taken round-robin over subjects). `model_options` overrides
+    ModelConfig sizes (e.g. small models for tests). `on_bad` "skip" reports and skips unusable
+    sequences, "fail" stops at the first. `half` stores the bundle's weights as float16.
+    """
+    say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    warn = warn or (lambda _m: None)
+    if modalities not in MODALITIES:
+        raise FacegenError(f"unknown modalities {modalities!r}: choose one of {', '.join(MODALITIES)}")
+    if fusion not in FUSIONS:
+        raise FacegenError(f"unknown fusion {fusion!r}: choose one of {', '.join(FUSIONS)}")
+    if epochs < 1 or batch_size < 1 or not lr > 0 or (max_sequences is not None and max_sequences < 1):
+        raise FacegenError("epochs, batch size and max sequences must be at least 1 and the learning rate positive")
+    out_bundle = Path(out_bundle)
+    if not out_bundle.parent.is_dir() and str(out_bundle.parent):
+        raise FacegenError(f"output folder {out_bundle.parent} does not exist: create it or choose another -o path")
+    ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else default_checkpoint_dir(out_bundle)
+    ckpt_path = ckpt_dir / CHECKPOINT
+    dev = resolve_device(device, say)
+    splits = splits or Splits()
+
+    from facegen.audio import FeatureConfig, mel_filters
+
+    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, warn=warn)
+    features = FeatureConfig()
+    filters = mel_filters(features)
+    backend = None
+    if modalities in ("both", "text"):
+        from facegen.text import load_text_backend
+
+        backend = load_text_backend(text_backend, text_model_path)
+    train_seqs = dataset.split("train", splits)
+    val_seqs = dataset.split("val", splits)
+    if max_sequences is not None:
+        train_seqs = _round_robin(train_seqs, lambda s: s.subject)[:max_sequences]
+        val_seqs = _round_robin(val_seqs, lambda s: s.subject)[:max_sequences]
+    say(f"features of {len(train_seqs)} training and {len(val_seqs)} validation sequences "
+        f"(cached in {dataset.cache_dir})")
+    train_items = dataset.load(train_seqs, features, filters, backend, progress=not quiet)
+    val_items = dataset.load(val_seqs, features, filters, backend, progress=not quiet)
+    if not train_items:
+        raise FacegenError(f"no usable training sequence in {dataset.root} for subjects "
+                           f"{' '.join(splits.train_subjects)}: check the files named above and the split options")
+    mesh = dataset.mesh
+    if mesh.num_vertices != train_items[0].template.shape[0]:
+        raise FacegenError(f"{dataset.root}/BIWI.ply has {mesh.num_vertices} vertices but the templates have "
+                           f"{train_items[0].template.shape[0]}: use the face list of this dataset")
+
+    speakers = list(splits.train_subjects)
+    cfg = ModelConfig(num_vertices=mesh.num_vertices, num_speakers=len(speakers),
+                      text_dim=backend.dim if backend is not None else 0, modalities=modalities, fusion=fusion,
+                      **(model_options or {}))
+    signature = {
+        "model_config": cfg.to_dict(), "feature_config": features.to_dict(),
+        "text_backend": backend.id if backend is not None else "none", "splits": splits.to_dict(),
+        "seed": seed, "batch_size": batch_size, "train": [it.name for it in train_items],
+        "val": [it.name for it in val_items],
+    }
+
+    with _torch_settings(threads):
+        torch.manual_seed(seed)
+        model = FaceModel(cfg)
+        mels = np.concatenate([it.mel for it in train_items]).astype(np.float64)
+        with torch.no_grad():
+            model.mel_mean.copy_(torch.from_numpy(mels.mean(0)).float())
+            model.mel_std.copy_(torch.from_numpy(mels.std(0)).float().clamp(min=MIN_MEL_STD))
+        model.to(dev).train()
+        optimizer = torch.optim.Adam(model.parameters(), lr=lr, fused=dev.type in ("cpu", "cuda"))
+        best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+        history: list[dict] = []
+        best_epoch, best_loss, done, seconds_before = 0, math.inf, 0, 0.0
+
+        if resume and ckpt_path.is_file():
+            tensors, meta = load_checkpoint(ckpt_path)
+            differs = [k for k in signature if meta.get("signature", {}).get(k) != signature[k]]
+            if differs:
+                raise FacegenError(f"checkpoint {ckpt_path} was made with a different setup ({', '.join(differs)} "
+                                   "differ): train without --resume, or with another --checkpoint-dir")
+            best_state = _restore(tensors, meta, model, optimizer)
+            history, done = meta["history"], int(meta["epoch"])
+            best_epoch, best_loss = int(meta["best_epoch"]), float(meta["best_loss"])
+            seconds_before = float(meta.get("seconds", 0.0))
+            for group in optimizer.param_groups:
+                if group["lr"] != lr:
+                    say(f"learning rate changed from {group['lr']:g} to {lr:g}")
+                    group["lr"] = lr
+            say(f"resuming after epoch {done} from {ckpt_path}")
+        elif resume:
+            say(f"no checkpoint in {ckpt_dir}: starting from scratch")
+        try:
+            ckpt_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FacegenError(f"cannot create the checkpoint folder {ckpt_dir} ({exc.strerror}): "
+                               "pass --checkpoint-dir to a writable folder") from exc
+
+        speaker_of = {s: i for i, s in enumerate(speakers)}
+        train_batches = [_Batch(it, speaker_of[it.subject], len(speakers), dev) for it in train_items]
+        val_batches = [_Batch(it, speaker_of[it.subject], len(speakers), dev) for it in val_items
+                       if it.subject in speaker_of]
+        say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
+            f"{len(val_batches)}, {epochs} epochs, device {dev}")
+        run_start = time.perf_counter()
+        epochs_run = 0
+        from tqdm import tqdm
+
+        for epoch in range(done, epochs):
+            t0 = time.perf_counter()
+            order = epoch_order(seed, epoch, len(train_batches))
+            bar = tqdm(total=len(order), desc=f"epoch {epoch + 1}/{epochs}", unit="seq", disable=quiet,
+                       file=sys.stderr, leave=False, dynamic_ncols=True)
+            try:
+                train_loss = train_epoch(model, optimizer, train_batches, order, batch_size, bar)
+            except _NonFinite as exc:
+                kept = (f"the last good checkpoint (epoch {epoch}) is in {ckpt_dir}" if epoch else
+                        "no checkpoint was written yet")
+                raise FacegenError(
+                    f"the training loss became {exc.value} at epoch {epoch + 1} on {exc.name}: training stopped "
+                    f"and {kept}: lower --lr (and --resume), or check that sequence") from None
+            bar.close()
+            val_loss = _validate(model, val_batches)
+            score = val_loss if val_batches else train_loss
+            improved = score < best_loss
+            if improved:
+                best_epoch, best_loss = epoch + 1, score
+                best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+            history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
+                            "seconds": time.perf_counter() - t0})
+            epochs_run += 1
+            seconds = seconds_before + time.perf_counter() - run_start
+            save_checkpoint(ckpt_path, model, best_state, optimizer, {
+                "signature": signature, "epoch": epoch + 1, "history": history, "best_epoch": best_epoch,
+                "best_loss": best_loss, "seconds": seconds})
+            csv_path, png_path = write_curves(history, ckpt_dir)
+            if not quiet:
+                tqdm.write(f"facegen: epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  val {val_loss:.4e}  "
+                           f"({history[-1]['seconds']:.1f} s){'  best' if improved else ''}", file=sys.stderr)
+        seconds = seconds_before + time.perf_counter() - run_start
+        csv_path, png_path = write_curves(history, ckpt_dir)
+
+        model.load_state_dict(best_state)
+        bundle = _make_bundle(model.cpu().eval(), features, filters, backend, speakers, mesh, {
+            "data": dataset.root.resolve().name, "epochs": len(history), "best_epoch": best_epoch,
+            "best_loss": best_loss, "loss": "val" if val_batches else "train",
+            "metrics": {k: history[best_epoch - 1][k] for k in ("train_loss", "val_loss")} if best_epoch else {},
+            "train_seconds": round(seconds, 1), "split": splits.to_dict(),
+            "train_sequences": len(train_batches), "val_sequences": len(val_batches), "seed": seed, "lr": lr,
+            "batch_size": batch_size, "device": str(dev)})
+        from facegen.bundle import save_bundle
+
+        save_bundle(bundle, out_bundle, half=half)
+        say(f"wrote {out_bundle} (best epoch {best_epoch}, {'validation' if val_batches else 'training'} "
+            f"loss {best_loss:.4e}); curves in {csv_path}" + (f" and {png_path}" if png_path else ""))
+    skipped = list(dataset.skipped)
+    return TrainResult(bundle=out_bundle, checkpoint_dir=ckpt_dir, epochs=len(history), epochs_run=epochs_run,
+                       best_epoch=best_epoch, best_loss=best_loss, history=history, seconds=seconds,
+                       curves_csv=csv_path, curves_png=png_path, train_sequences=len(train_batches),
+                       val_sequences=len(val_batches), skipped=skipped)
+
+
+def _make_bundle(model: FaceModel, features, filters: np.ndarray, backend, speakers: list[str], mesh,
+                 provenance: dict):
+    from facegen import __version__
+    from facegen.bundle import Bundle
+    from facegen.mesh import Mesh
+
+    template = Mesh(mesh.vertices.astype(np.float32), mesh.faces, dict(mesh.regions))
+    return Bundle(model=model, features=features, mel_filters=filters,
+                  text_backend=backend.id if backend is not None else "none", speakers=speakers,
+                  template=template, provenance=dict(provenance, facegen=__version__, trained=time.strftime(
+                      "%Y-%m-%dT%H:%M:%S%z")))

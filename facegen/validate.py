@@ -1,0 +1,395 @@
+"""Checks on written animation assets (USD and .npy): `validate(path) -> Report`.
+
+Each check has a name, ok, a one-line detail and a severity. An "error" check that fails makes the report
+fail; a "warning" is shown but never fails it (pxr validators' warnings are warnings, their errors are
+errors; facegen's own checks are errors). The checks:
+
+  file            the file opens (USD: as a stage; .npy: a [T, 3V] float array, no pickles)
+  mesh            USD: a UsdGeom.Mesh exists (under the defaultPrim)
+  vertex count    every frame has the template's vertex count (23,370 for BIWI topology); without a
+                  template, the file's own rest pose / first frame sets it
+  faces           the face list equals the template's (USD; .npy stores no faces); without a template,
+                  triangles whose indices are in range
+  frame rate      USD: timeCodesPerSecond authored, equal to framesPerSecond and to `fps` when given
+  time samples    USD: points sampled exactly at 0, 1, ..., T-1, stage start/end 0 and T-1, an extent
+                  sample per frame that contains the frame's points
+  finite          no NaN or infinite coordinate
+  displacement    no vertex moves further than `max_displacement` x the rest pose's bounding-box
+                  diagonal from its rest position (rest = template, else the file's rest pose, else frame 0)
+  audio           the audio is attached and readable (USD: the SpatialAudio prim's file resolves relative
+                  to the layer; .npy: the WAV sidecar beside it); `audio_path` replaces it when given
+  audio duration  the frame count matches the audio's duration x fps within one frame
+  usd:<validator> pxr's UsdValidation validators (all registered), one check per error or warning
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import sys
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from facegen.errors import FacegenError
+from facegen.exchange import npy as npy_format
+from facegen.exchange import usd as usd_format
+from facegen.exchange.wav import read_wav, sidecar_path
+from facegen.mesh import Mesh
+
+DEFAULT_MAX_DISPLACEMENT = 0.25
+DEFAULT_FPS = 25.0
+
+
+@dataclass
+class Check:
+    name: str
+    ok: bool
+    detail: str
+    severity: str = "error"  # "error": failing it fails the report; "warning": shown only
+
+    @property
+    def label(self) -> str:
+        if self.ok:
+            return "PASS"
+        return "FAIL" if self.severity == "error" else "WARN"
+
+
+@dataclass
+class Report:
+    path: str
+    checks: list[Check] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return all(c.ok for c in self.checks if c.severity == "error")
+
+    @property
+    def failures(self) -> list[Check]:
+        return [c for c in self.checks if not c.ok and c.severity == "error"]
+
+    @property
+    def warnings(self) -> list[Check]:
+        return [c for c in self.checks if not c.ok and c.severity != "error"]
+
+    def check(self, name: str) -> Check | None:
+        """The first check called `name` (None when it did not run)."""
+        return next((c for c in self.checks if c.name == name), None)
+
+    def add(self, name: str, ok: bool, detail: str, severity: str = "error") -> bool:
+        self.checks.append(Check(name, bool(ok), detail, severity))
+        return bool(ok)
+
+    def to_text(self) -> str:
+        head = "OK" if self.ok else "FAILED"
+        counts = f"{len(self.checks)} checks, {len(self.failures)} failed, {len(self.warnings)} warnings"
+        lines = [f"{self.path}: {head} ({counts})"]
+        width = min(max((len(c.name) for c in self.checks), default=0), 14)
+        lines += [f"  {c.label}  {c.name:<{width}}  {c.detail}" for c in self.checks]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {"path": self.path, "ok": self.ok, "checks": [asdict(c) for c in self.checks]}
+
+    def to_json(self, indent: int | None = 2) -> str:
+        return json.dumps(self.to_dict(), indent=indent)
+
+
+def validate(
+    path: str | os.PathLike,
+    template: Mesh | None = None,
+    fps: float | None = None,
+    audio_path: str | os.PathLike | None = None,
+    *,
+    require_audio: bool = True,
+    max_displacement: float = DEFAULT_MAX_DISPLACEMENT,
+) -> Report:
+    """Check an animation file written by facegen (or any file of the same layout); never raises for
+    a bad file: every problem is a failed check in the returned Report."""
+    path = Path(path)
+    report = Report(str(path))
+    suffix = path.suffix.lower()
+    if suffix in usd_format.EXTENSIONS:
+        _validate_usd(report, path, template, fps, audio_path, require_audio, max_displacement)
+    elif suffix in npy_format.EXTENSIONS:
+        _validate_npy(report, path, template, fps, audio_path, require_audio, max_displacement)
+    else:
+        exts = ", ".join(usd_format.EXTENSIONS + npy_format.EXTENSIONS)
+        report.add("file", False, f"cannot validate {suffix or 'files without extension'}: use one of {exts}")
+    return report
+
+
+# ---- USD ---------------------------------------------------------------------------------------------
+
+
+def _validate_usd(report, path, template, fps, audio_path, require_audio, max_displacement) -> None:
+    try:
+        stage = usd_format.open_stage(path)
+    except FacegenError as exc:
+        report.add("file", False, str(exc))
+        return
+    report.add("file", True, f"opened as a USD stage ({stage.GetRootLayer().GetFileFormat().formatId})")
+    mesh = usd_format.find_mesh(stage)
+    if not report.add(
+        "mesh", mesh is not None, f"{mesh.GetPath()}" if mesh else "no UsdGeom.Mesh in the stage"
+    ):
+        _usd_validators(report, stage)
+        return
+
+    times, frames = usd_format.points_samples(mesh)
+    rest = usd_format.rest_points(mesh)
+    own = rest if rest is not None else (frames[0] if frames else None)
+    expected = template.num_vertices if template is not None else (len(own) if own is not None else None)
+    source = (
+        "the template" if template is not None else "the file's rest pose" if rest is not None else "frame 0"
+    )
+    counts = sorted({len(f) for f in frames})
+    if not frames:
+        report.add("vertex count", False, "the mesh has no points time samples")
+    else:
+        wrong = [i for i, f in enumerate(frames) if len(f) != expected]
+        report.add(
+            "vertex count",
+            not wrong,
+            f"{expected} vertices per frame ({source})"
+            if not wrong
+            else f"{len(wrong)} of {len(frames)} frames have {counts} vertices, {source} has {expected}",
+        )
+
+    try:
+        faces = usd_format.mesh_faces(mesh)
+    except FacegenError as exc:
+        faces = None
+        report.add("faces", False, str(exc))
+    if faces is not None:
+        _check_faces(report, faces, template, expected)
+
+    file_fps = usd_format.stage_fps(stage)
+    layer = stage.GetRootLayer()
+    if file_fps is None:
+        report.add("frame rate", False, "timeCodesPerSecond is not authored: the frame rate is unknown")
+    else:
+        problems = []
+        if layer.HasFramesPerSecond() and abs(layer.framesPerSecond - file_fps) > 1e-9:
+            problems.append(f"framesPerSecond {layer.framesPerSecond:g} differs from timeCodesPerSecond")
+        if fps is not None and abs(file_fps - fps) > 1e-9:
+            problems.append(f"expected {fps:g} fps")
+        report.add(
+            "frame rate",
+            not problems,
+            f"{file_fps:g} fps" + (": " + "; ".join(problems) if problems else ""),
+        )
+    rate = file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS
+
+    _check_time_samples(report, stage, mesh, times)
+    _check_values(report, frames if counts == [expected] else [], own, template, max_displacement)
+
+    audio = None
+    sound = usd_format.find_audio(stage)
+    if sound is None:
+        report.add(
+            "audio", not require_audio, "no SpatialAudio prim" + ("" if require_audio else " (not required)")
+        )
+    else:
+        asset, resolved = usd_format.audio_file(sound)
+        if not resolved:
+            report.add("audio", False, f"{sound.GetPath()} refers to {asset!r}, which does not resolve")
+        else:
+            audio = _read_audio(report, "audio", resolved, f"{sound.GetPath()} -> {asset}")
+    if audio_path is not None:
+        audio = _read_audio(report, "audio file", audio_path, str(audio_path))
+    _check_duration(report, len(frames), rate, audio, require_audio)
+    _usd_validators(report, stage)
+
+
+def _check_faces(report: Report, faces: np.ndarray, template: Mesh | None, num_vertices: int | None) -> None:
+    if template is not None:
+        same = faces.shape == template.faces.shape and np.array_equal(faces, template.faces)
+        if same:
+            detail = f"{len(faces)} triangles, identical to the template's"
+        elif faces.shape != template.faces.shape:
+            detail = f"{len(faces)} triangles, the template has {len(template.faces)}"
+        else:
+            first = int(np.nonzero((faces != template.faces).any(axis=1))[0][0])
+            detail = f"{len(faces)} triangles, but they differ from the template's from triangle {first} on"
+        report.add("faces", same, detail)
+    else:
+        ok = num_vertices is not None and faces.min() >= 0 and faces.max() < num_vertices
+        report.add(
+            "faces", ok, f"{len(faces)} triangles" + ("" if ok else f", indices outside 0..{num_vertices}")
+        )
+
+
+def _check_time_samples(report: Report, stage, mesh, times: list[float]) -> None:
+    from pxr import UsdGeom
+
+    count = len(times)
+    problems = []
+    if times != [float(i) for i in range(count)]:
+        shown = ", ".join(f"{t:g}" for t in times[:4]) + (", ..." if count > 4 else "")
+        problems.append(f"points sampled at {shown} instead of 0, 1, ..., {count - 1}")
+    if count and (stage.GetStartTimeCode() != 0 or stage.GetEndTimeCode() != count - 1):
+        problems.append(
+            f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected 0..{count - 1}"
+        )
+    extent = mesh.GetExtentAttr()
+    if list(extent.GetTimeSamples()) != times:
+        problems.append("extent is not sampled at the same times as points")
+    else:
+        points = mesh.GetPointsAttr()
+        for t in times:
+            want = np.asarray(UsdGeom.PointBased.ComputeExtent(points.Get(t)), dtype=np.float64)
+            have = np.asarray(extent.Get(t), dtype=np.float64)
+            if have.shape != (2, 3) or not np.allclose(have, want, rtol=1e-5, atol=1e-6):
+                problems.append(f"extent at time {t:g} does not bound the points")
+                break
+    report.add(
+        "time samples", not problems, "; ".join(problems) or f"{count} frames, one at each of 0..{count - 1}"
+    )
+
+
+def _check_values(
+    report: Report,
+    frames: list[np.ndarray] | np.ndarray,
+    own_rest: np.ndarray | None,
+    template: Mesh | None,
+    max_displacement: float,
+) -> None:
+    """finite + displacement, over [T, V, 3] frames of the right vertex count (skipped when empty)."""
+    if len(frames) == 0:
+        report.add("finite", False, "no frames with the expected vertex count to check")
+        return
+    bad_frames = [i for i, f in enumerate(frames) if not np.isfinite(f).all()]
+    report.add(
+        "finite",
+        not bad_frames,
+        "no NaN or infinite coordinates"
+        if not bad_frames
+        else f"{len(bad_frames)} frames have NaN/inf coordinates (first: frame {bad_frames[0]})",
+    )
+    rest = template.vertices if template is not None else own_rest if own_rest is not None else frames[0]
+    rest = np.asarray(rest, dtype=np.float32)
+    if not np.isfinite(rest).all():
+        report.add("displacement", False, "the rest pose has NaN/inf coordinates")
+        return
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    bound = max_displacement * size
+    worst, worst_frame = 0.0, 0
+    for i, f in enumerate(frames):
+        with np.errstate(invalid="ignore", over="ignore"):
+            d = np.sqrt(((np.asarray(f, dtype=np.float32) - rest) ** 2).sum(axis=1))
+        d = float(d[np.isfinite(d)].max(initial=0.0))  # NaN/inf vertices are the "finite" check's failure
+        if d > worst:
+            worst, worst_frame = d, i
+    share = f"{worst / size:.1%}" if size > 0 else "n/a"
+    report.add(
+        "displacement",
+        worst <= bound,
+        f"largest vertex offset {worst:.4g} (frame {worst_frame}) = {share} of the face size "
+        f"{size:.4g}; bound {max_displacement:.0%}",
+    )
+
+
+def _read_audio(report: Report, name: str, path, shown: str) -> tuple[np.ndarray, int] | None:
+    try:
+        samples, rate = read_wav(path)
+    except FacegenError as exc:
+        report.add(name, False, f"{shown}: {exc}")
+        return None
+    if len(samples) == 0:
+        report.add(name, False, f"{shown}: no audio samples")
+        return None
+    report.add(name, True, f"{shown}: {len(samples) / rate:.3f} s at {rate} Hz")
+    return samples, rate
+
+
+def _check_duration(report: Report, frames: int, fps: float, audio, require_audio: bool) -> None:
+    if audio is None:
+        if require_audio:
+            report.add("audio duration", False, "no readable audio to compare the frame count with")
+        return
+    seconds = len(audio[0]) / audio[1]
+    expected = seconds * fps
+    ok = abs(frames - expected) <= 1.0
+    report.add(
+        "audio duration",
+        ok,
+        f"{frames} frames at {fps:g} fps = {frames / fps:.3f} s; audio {seconds:.3f} s = {expected:.1f} frames"
+        + ("" if ok else " (more than one frame apart)"),
+    )
+
+
+def _usd_validators(report: Report, stage) -> None:
+    from pxr import UsdValidation
+
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    with _quiet_native_stderr():  # pxr also prints its findings (and noise) as warnings on stderr
+        errors = context.Validate(stage)
+    found = 0
+    for error in errors:
+        kind = error.GetType()
+        if kind not in (UsdValidation.ValidationErrorType.Error, UsdValidation.ValidationErrorType.Warn):
+            continue
+        found += 1
+        validator = error.GetValidator()
+        name = validator.GetMetadata().name if validator else error.GetName()
+        severity = "error" if kind == UsdValidation.ValidationErrorType.Error else "warning"
+        report.add(f"usd:{name}", False, error.GetMessage(), severity)
+    if not found:
+        report.add(
+            "usd validators", True, f"{len(registry.GetOrLoadAllValidators())} pxr validators, no findings"
+        )
+
+
+@contextlib.contextmanager
+def _quiet_native_stderr() -> Iterator[None]:
+    """Send file descriptor 2 (where pxr's C++ diagnostics go) to /dev/null for the block."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+# ---- .npy --------------------------------------------------------------------------------------------
+
+
+def _validate_npy(report, path, template, fps, audio_path, require_audio, max_displacement) -> None:
+    try:
+        data = npy_format.load_frames(path)
+    except FacegenError as exc:
+        report.add("file", False, str(exc))
+        return
+    report.add("file", True, f"[{data.shape[0]}, {data.shape[1]}] {data.dtype} array")
+    if template is None:
+        report.add(
+            "template", False, ".npy files store no faces or rest pose: pass the template mesh (--template)"
+        )
+        return
+    num_vertices = data.shape[1] // 3
+    same = num_vertices == template.num_vertices
+    report.add(
+        "vertex count",
+        same,
+        f"{num_vertices} vertices per frame"
+        + (" (the template's)" if same else f", the template has {template.num_vertices}"),
+    )
+    frames = data.reshape(len(data), num_vertices, 3) if same else []
+    _check_values(report, frames, None, template, max_displacement)
+    audio = None
+    wav = Path(audio_path) if audio_path is not None else sidecar_path(path)
+    if wav.is_file():
+        audio = _read_audio(report, "audio", wav, str(wav))
+    else:
+        report.add(
+            "audio", not require_audio, f"no audio file {wav}" + ("" if require_audio else " (not required)")
+        )
+    _check_duration(report, len(data), float(fps if fps is not None else DEFAULT_FPS), audio, require_audio)

@@ -1,0 +1,157 @@
+"""Training on a tiny dataset: the loss goes down, resume equals an uninterrupted run, runs are
+deterministic, checkpoints and curves are written, bad setups are refused with clear messages."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from safetensors import safe_open
+from test_data import TOY_SPLITS, make_dataset
+
+from facegen.bundle import load_bundle, read_metadata
+from facegen.data import Splits
+from facegen.errors import FacegenError
+from facegen.train import CHECKPOINT, default_checkpoint_dir, epoch_order, resolve_device, train
+
+SMALL = {"conv_channels": 16, "audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16,
+         "lstm_dim": 16}
+
+
+@pytest.fixture(scope="module")
+def toy(tmp_path_factory):
+    return make_dataset(tmp_path_factory.mktemp("toy"), with_alignments=False)
+
+
+def _train(toy, out, **kw):
+    options = {"modalities": "audio", "epochs": 2, "lr": 3e-3, "splits": TOY_SPLITS, "device": "cpu",
+               "model_options": SMALL, "quiet": True, "cache_dir": toy / ".cache", "threads": 2}
+    options.update(kw)
+    return train(toy, out, **options)
+
+
+def _weights(path):
+    out = {}
+    with safe_open(str(path), framework="pt") as f:
+        for k in f.keys():
+            out[k] = f.get_tensor(k)
+    return out
+
+
+def test_training_lowers_the_loss_and_writes_bundle_checkpoint_and_curves(toy, tmp_path):
+    out = tmp_path / "model.safetensors"
+    result = _train(toy, out, epochs=8)
+    losses = [h["train_loss"] for h in result.history]
+    val = [h["val_loss"] for h in result.history]
+    assert len(result.history) == 8 and result.epochs_run == 8
+    assert losses[-1] < 0.5 * losses[0] and min(val) < 0.5 * val[0]
+    assert result.best_epoch == int(np.argmin(val)) + 1 and result.best_loss == pytest.approx(min(val))
+    assert result.train_sequences == 8 and result.val_sequences == 2
+
+    bundle = load_bundle(out)
+    assert bundle.speakers == ["F2", "F3"] and bundle.text_backend == "none"
+    assert bundle.config.modalities == "audio" and bundle.template.num_vertices == 200
+    assert set(bundle.template.regions) == {"lips", "upper_face"}
+    prov = bundle.provenance
+    assert prov["data"] == toy.name and prov["epochs"] == 8 and prov["best_epoch"] == result.best_epoch
+    assert prov["split"]["train_sentences"] == "1-4" and prov["train_seconds"] > 0
+    assert prov["metrics"]["val_loss"] == pytest.approx(min(val))
+    # mel statistics come from the training features
+    assert bundle.model.mel_mean.abs().sum() > 0 and bool((bundle.model.mel_std >= 1.0).all())
+
+    ckpt = default_checkpoint_dir(out)
+    assert ckpt == tmp_path / "model.ckpt" and (ckpt / CHECKPOINT).is_file()
+    with open(ckpt / "loss.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["epoch"]) for r in rows] == list(range(1, 9))
+    assert float(rows[0]["train_loss"]) == pytest.approx(losses[0], rel=1e-5)
+    assert (ckpt / "loss.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(tmp_path.glob(".*"))  # no temporary files left behind
+
+
+def test_resume_continues_and_equals_an_uninterrupted_run(toy, tmp_path):
+    first = _train(toy, tmp_path / "a.safetensors", epochs=2)
+    assert first.epochs_run == 2
+    resumed = _train(toy, tmp_path / "a.safetensors", epochs=3, resume=True)
+    assert resumed.epochs_run == 1 and resumed.epochs == 3
+    straight = _train(toy, tmp_path / "b.safetensors", epochs=3)
+    assert [h["train_loss"] for h in resumed.history] == [h["train_loss"] for h in straight.history]
+    assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in straight.history]
+    a, b = _weights(tmp_path / "a.safetensors"), _weights(tmp_path / "b.safetensors")
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    ca = _weights(tmp_path / "a.ckpt" / CHECKPOINT)
+    cb = _weights(tmp_path / "b.ckpt" / CHECKPOINT)
+    assert all(torch.equal(ca[k], cb[k]) for k in ca if not k.startswith("rng"))
+    # nothing left to do: resuming a finished run only rewrites the bundle
+    again = _train(toy, tmp_path / "a.safetensors", epochs=3, resume=True)
+    assert again.epochs_run == 0 and again.best_epoch == straight.best_epoch
+
+
+def test_two_runs_with_the_same_seed_are_identical(toy, tmp_path):
+    _train(toy, tmp_path / "x.safetensors", epochs=1, seed=7)
+    _train(toy, tmp_path / "y.safetensors", epochs=1, seed=7)
+    _train(toy, tmp_path / "z.safetensors", epochs=1, seed=8)
+    x, y, z = (_weights(tmp_path / f"{n}.safetensors") for n in "xyz")
+    assert all(torch.equal(x[k], y[k]) for k in x)
+    assert not torch.equal(x["model.fc_out.weight"], z["model.fc_out.weight"])
+    assert list(epoch_order(7, 3, 10)) == list(epoch_order(7, 3, 10))
+    assert list(epoch_order(7, 3, 10)) != list(epoch_order(7, 4, 10))
+
+
+def test_text_modalities_train_with_a_text_backend(tmp_path_factory, tmp_path):
+    from tiny_gpt2 import make_tiny_gpt2
+
+    folder = make_tiny_gpt2(tmp_path_factory.mktemp("gpt2"), n_positions=64)
+    toy = make_dataset(tmp_path / "d", subjects=("F2", "F3"), sentences=range(1, 6))
+    for modalities, fusion in (("both", "tensor"), ("both", "concat"), ("text", "tensor")):
+        out = tmp_path / f"{modalities}-{fusion}.safetensors"
+        result = _train(toy, out, epochs=1, modalities=modalities, fusion=fusion, text_backend=str(folder))
+        assert math.isfinite(result.best_loss)
+        meta = read_metadata(out)
+        assert meta["text_backend"] == {"id": str(folder), "dim": 32}
+        assert meta["model_config"]["modalities"] == modalities and meta["model_config"]["fusion"] == fusion
+
+
+def test_half_bundle_and_batches(toy, tmp_path):
+    result = _train(toy, tmp_path / "h.safetensors", epochs=1, half=True, batch_size=3)
+    assert math.isfinite(result.best_loss)
+    assert _weights(tmp_path / "h.safetensors")["model.fc_out.weight"].dtype == torch.float16
+    assert load_bundle(tmp_path / "h.safetensors").model.fc_out.weight.dtype == torch.float32
+
+
+def test_a_nan_loss_stops_training_and_keeps_the_last_checkpoint(toy, tmp_path):
+    out = tmp_path / "n.safetensors"
+    _train(toy, out, epochs=1)
+    with pytest.raises(FacegenError, match=r"loss became (nan|inf) at epoch 2 on F[23]_e0\d.*last good checkpoint "
+                                           r"\(epoch 1\)"):
+        _train(toy, out, epochs=3, resume=True, lr=1e38)
+    with safe_open(str(tmp_path / "n.ckpt" / CHECKPOINT), framework="pt") as f:
+        assert json.loads(f.metadata()["facegen_checkpoint"])["epoch"] == 1
+
+
+def test_bad_setups_are_refused(toy, tmp_path):
+    _train(toy, tmp_path / "s.safetensors", epochs=1)
+    with pytest.raises(FacegenError, match="different setup .*seed"):
+        _train(toy, tmp_path / "s.safetensors", epochs=2, seed=5, resume=True)
+    with pytest.raises(FacegenError, match="unknown modalities"):
+        _train(toy, tmp_path / "m.safetensors", modalities="video")
+    with pytest.raises(FacegenError, match="output folder .* does not exist"):
+        _train(toy, tmp_path / "no" / "m.safetensors")
+    with pytest.raises(FacegenError, match="no usable training sequence"):
+        _train(toy, tmp_path / "m.safetensors", splits=Splits(train_subjects=("M9",), test_subjects=()),
+               warn=None)
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
+def test_device_choice_without_cuda(toy, tmp_path):
+    said: list[str] = []
+    assert resolve_device("auto", said.append) == torch.device("cpu") and "CPU" in said[0]
+    assert resolve_device("cpu", said.append) == torch.device("cpu")
+    with pytest.raises(FacegenError, match="no CUDA GPU"):
+        _train(toy, tmp_path / "c.safetensors", device="cuda")
+    with pytest.raises(FacegenError, match="unknown device"):
+        resolve_device("tpu", said.append)
