@@ -7,13 +7,19 @@ original words. Words missing from pocketsphinx's dictionary get a pronunciation
 
 from __future__ import annotations
 
+import csv
+import json
+import math
+import os
 import re
 import threading
 import unicodedata
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 
 RATE = 16000  # pocketsphinx's en-us model
@@ -241,15 +247,18 @@ def pronounce(token: str) -> list[str]:
 
 _LOCK = threading.RLock()
 _DECODERS: dict[str, object] = {}
-# The alignment search is constrained by the transcript, so wide beams stay cheap and keep noisy speech
-# aligned. bestpath=False: the lattice pass that follows the FSG search drops valid alignments.
-_SEARCH = {"beam": 1e-120, "wbeam": 1e-100, "pbeam": 1e-120, "maxhmmpf": -1, "bestpath": False}
+# Alignment tries these in turn until every word is placed. bestpath=False: the lattice pass after the
+# FSG search drops valid alignments. Wide beams rescue noisy speech (the search is constrained by the
+# transcript, so they stay affordable); fillers (noise/breath models) sometimes derail it.
+_WIDE = {"beam": 1e-120, "wbeam": 1e-100, "pbeam": 1e-120, "maxhmmpf": -1}
 _CONFIGS = {
-    "align": {"lm": None, **_SEARCH},
-    "align-nofiller": {"lm": None, "fsgusefiller": False, **_SEARCH},  # fallback when fillers derail it
-    "recognize": {"beam": 1e-60, "wbeam": 1e-40, "pbeam": 1e-60},
+    "align": {"lm": None, "bestpath": False},
+    "align-wide": {"lm": None, "bestpath": False, **_WIDE},
+    "align-nofiller": {"lm": None, "bestpath": False, "fsgusefiller": False, **_WIDE},
+    "recognize": {},
 }
-_PHONES = ("AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW", *_CONSONANTS)
+_VOWELS = ("AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW")
+_PHONES = _VOWELS + _CONSONANTS
 _PHONE_WORD = {p: f"phone_{p.lower()}" for p in _PHONES}  # one-phone words, to align a free phone loop
 # A transcript that does not match the speech (see _check_match): more than this share of the loud
 # frames left outside its words, or a median word fitting the sounds worse than the best free phone
@@ -413,7 +422,7 @@ def align(audio: np.ndarray, sample_rate: int, transcript: str) -> list[Word]:
     pcm = _pcm_bytes(audio)
     spoken = [(i, token) for i, (_, tokens) in enumerate(entries) for token in tokens]
     with _LOCK:
-        for kind in ("align", "align-nofiller"):
+        for kind in ("align", "align-wide", "align-nofiller"):
             decoder = _decoder(kind)
             keys = [_dictionary_word(decoder, token) for _, token in spoken]
             decoder.set_align_text(" ".join(keys))
@@ -446,3 +455,281 @@ def recognize(audio: np.ndarray, sample_rate: int) -> list[Word]:
     duration = len(audio) / RATE
     return [Word(_base(w), round(first * FRAME, 3), round(min((last + 1) * FRAME, duration), 3))
             for w, first, last in segments if not _is_filler(w)]
+
+
+# --------------------------------------------------------------------------------------------------
+# alignment files: Gentle JSON, Praat/MFA TextGrid, WhisperX JSON, plain JSON, CSV
+
+_PAUSE_LABELS = {"", "sil", "sp", "<eps>", "<sil>", "{sl}", "#"}
+
+
+def read_alignment(path: str | os.PathLike, duration: float | None = None) -> list[Word]:
+    """Read word timings from a Gentle / WhisperX / plain JSON, Praat or MFA TextGrid, or CSV file.
+
+    The format is detected from the content. Pauses and words not found in the audio are left out.
+    With `duration` (s), times past the audio's end (beyond a small tolerance) are an error, as are
+    negative, reversed or overlapping times; the error names the file and the problem.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FacegenError(f"cannot read alignment {path} ({exc.strerror}): check the path") from exc
+    text = _decode_text(raw).lstrip()
+    try:
+        if text.startswith('File type = "ooTextFile"') or path.suffix.lower() == ".textgrid":
+            words = _read_textgrid(text)
+        elif text.startswith(("{", "[")):
+            words = _read_json(json.loads(text))
+        else:
+            words = _read_csv(text)
+    except (ValueError, KeyError, TypeError, IndexError) as exc:  # json.JSONDecodeError is a ValueError
+        raise FacegenError(f"alignment {path} is malformed ({exc}): write it as Gentle/WhisperX/plain JSON, "
+                           "a TextGrid or a CSV with word,start,end columns") from exc
+    _validate(words, path, duration)
+    return words
+
+
+def _decode_text(raw: bytes) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # Praat writes UTF-16 when the text needs it
+        return raw.decode("utf-16")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _word(text: object, start: object, end: object) -> Word | None:
+    """A Word from file values; None for a pause or punctuation."""
+    label = strip_edges(str(text).strip())
+    if label.lower() in _PAUSE_LABELS:
+        return None
+    return Word(label, _seconds(start), _seconds(end))
+
+
+def _seconds(value: object) -> float:
+    if isinstance(value, bool) or value is None or value == "":
+        raise ValueError(f"missing or invalid time {value!r}")
+    number = float(value)  # ValueError for text
+    if not math.isfinite(number):
+        raise ValueError(f"time {value!r} is not a finite number")
+    return number
+
+
+def _read_json(data: object) -> list[Word]:
+    if isinstance(data, dict) and ("segments" in data or "word_segments" in data):
+        return _read_whisperx(data)
+    items = data["words"] if isinstance(data, dict) else data
+    if not isinstance(items, list):
+        raise TypeError('expected a list of words or {"words": [...]}')
+    gentle = any(isinstance(it, dict) and ("case" in it or "alignedWord" in it) for it in items)
+    words = []
+    for item in items:
+        if not isinstance(item, dict):
+            raise TypeError(f"word entry {item!r} is not an object")
+        if gentle:  # Gentle: only "success" words have times
+            if item.get("case", "success") != "success" or "start" not in item:
+                continue
+            word = _word(item.get("word", item.get("alignedWord", "")), item["start"], item["end"])
+        else:
+            label = item["word"] if "word" in item else item["text"]
+            word = _word(label, item["start"], item["end"])
+        if word:
+            words.append(word)
+    return words
+
+
+def _read_whisperx(data: dict) -> list[Word]:
+    """WhisperX (or Whisper with word timestamps): segments[].words[], else word_segments[].
+
+    Words WhisperX could not time (often numbers) are placed in the gap between their neighbours.
+    """
+    segments = data.get("segments") or []
+    if not isinstance(segments, list):
+        raise TypeError("'segments' is not a list")
+    items = [w for seg in segments for w in seg.get("words", [])] or data.get("word_segments") or []
+    labels = [str(it["word"] if "word" in it else it["text"]) for it in items]
+    starts = [it.get("start") for it in items]
+    ends = [it.get("end") for it in items]
+    i = 0
+    while i < len(items):  # fill runs of untimed words between timed neighbours
+        if starts[i] is not None and ends[i] is not None:
+            i += 1
+            continue
+        j = i
+        while j < len(items) and (starts[j] is None or ends[j] is None):
+            j += 1
+        left = _seconds(ends[i - 1]) if i > 0 else None
+        right = _seconds(starts[j]) if j < len(items) else None
+        if left is not None and right is not None and right >= left:
+            step = (right - left) / (j - i)
+            for k in range(i, j):
+                starts[k], ends[k] = left + step * (k - i), left + step * (k - i + 1)
+        i = j
+    words = []
+    for label, start, end in zip(labels, starts, ends, strict=True):
+        if start is None or end is None:
+            continue  # untimed at the edges: nothing to place it by
+        word = _word(label, start, end)
+        if word:
+            words.append(word)
+    return words
+
+
+# a quoted string, an [index] (skipped), a flag, a number, or a label (skipped)
+_TEXTGRID_TOKEN = re.compile(r'"((?:[^"]|"")*)"|\[\d*\]|(<exists>|<absent>)'
+                             r'|(-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)|[A-Za-z_][A-Za-z_0-9 ]*\??|\S')
+
+
+def _read_textgrid(text: str) -> list[Word]:
+    """Praat TextGrid, long or short text format: the `words` tier, else the first interval tier."""
+    values: list[str | float] = []
+    for m in _TEXTGRID_TOKEN.finditer(text):
+        if m.group(1) is not None:
+            values.append(m.group(1).replace('""', '"'))
+        elif m.group(3) is not None:
+            values.append(float(m.group(3)))
+    # both formats reduce to: "ooTextFile" "TextGrid" xmin xmax size, then per tier:
+    # class name xmin xmax count and count intervals (xmin xmax text) or points (time mark)
+    if values[:2] != ["ooTextFile", "TextGrid"]:
+        raise ValueError("not a text TextGrid (save it from Praat as a text file)")
+    pos, tiers = 5, []
+    for _ in range(int(values[4])):
+        kind, name, count = values[pos], values[pos + 1], int(values[pos + 4])
+        pos += 5
+        width = 3  # IntervalTier: xmin xmax text; TextTier: time mark
+        if kind == "TextTier":
+            width = 2
+        elif kind != "IntervalTier":
+            raise ValueError(f"unknown tier class {kind!r}")
+        tiers.append((kind, str(name), values[pos:pos + width * count]))
+        pos += width * count
+    intervals = [t for t in tiers if t[0] == "IntervalTier"]
+    if not intervals:
+        raise ValueError("no interval tier")
+    named = [t for t in intervals if t[1].strip().lower().endswith("words")]
+    _, _, flat = (named or intervals)[0]
+    words = []
+    for k in range(0, len(flat), 3):
+        start, end, label = flat[k:k + 3]
+        if not isinstance(label, str):
+            raise TypeError(f"interval {k // 3 + 1} has no text")
+        word = _word(label, start, end)
+        if word:
+            words.append(word)
+    return words
+
+
+def _read_csv(text: str) -> list[Word]:
+    """CSV/TSV with a header naming word (or text/label), start and end; or 3 columns without one."""
+    try:
+        dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t")
+    except csv.Error:
+        dialect = csv.excel
+    rows = [r for r in csv.reader(text.splitlines(), dialect) if any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError("the file is empty")
+    header = [c.strip().lower() for c in rows[0]]
+    names = {"word": ("word", "text", "label", "token"), "start": ("start", "begin", "onset", "start_time"),
+             "end": ("end", "stop", "offset", "end_time")}
+    columns = {key: next((header.index(a) for a in alias if a in header), None)
+               for key, alias in names.items()}
+    if all(v is not None for v in columns.values()):
+        order, rows = (columns["word"], columns["start"], columns["end"]), rows[1:]
+    else:
+        if any(len(r) != 3 for r in rows):
+            raise ValueError("rows without a word,start,end header must have exactly 3 columns")
+
+        def numeric(cell: str) -> bool:
+            try:
+                float(cell)
+                return True
+            except ValueError:
+                return False
+
+        row = rows[0]
+        text_cols = [i for i, c in enumerate(row) if not numeric(c)]
+        if len(text_cols) != 1:
+            raise ValueError(f"cannot tell the word column from the times in row {row}")
+        word_col = text_cols[0]
+        start_col, end_col = [i for i in range(3) if i != word_col]
+        order = (word_col, start_col, end_col)
+    words = []
+    for n, row in enumerate(rows, 1):
+        if len(row) <= max(order):
+            raise ValueError(f"row {n} has too few columns")
+        word = _word(row[order[0]], row[order[1]].strip(), row[order[2]].strip())
+        if word:
+            words.append(word)
+    return words
+
+
+def _validate(words: list[Word], path: Path, duration: float | None) -> None:
+    def fail(problem: str) -> FacegenError:
+        return FacegenError(f"alignment {path}: {problem}: fix the file or align again")
+
+    if not words:
+        raise fail("it contains no timed words")
+    previous = None
+    for w in words:
+        if w.start < 0 or w.end < 0:
+            raise fail(f"word {w.text!r} has a negative time ({w.start:g}-{w.end:g} s)")
+        if w.end < w.start:
+            raise fail(f"word {w.text!r} ends before it starts ({w.start:g}-{w.end:g} s)")
+        if previous and (w.start < previous.start or w.start < previous.end - 0.01):
+            raise fail(f"times are not in order: {w.text!r} at {w.start:g} s starts before "
+                       f"{previous.text!r} ({previous.start:g}-{previous.end:g} s) ends")
+        previous = w
+    if duration is not None and words[-1].end > duration + TOLERANCE:
+        raise fail(f"word {words[-1].text!r} ends at {words[-1].end:g} s, after the audio's end at "
+                   f"{duration:g} s (is it the alignment of another recording?)")
+
+
+def write_alignment(words: list[Word], path: str | os.PathLike, duration: float | None = None) -> Path:
+    """Write words as our plain JSON ({"words": [{"word", "start", "end"}]}), a TextGrid or a CSV.
+
+    The format follows the suffix (.json, .TextGrid, .csv). A TextGrid gets a `words` interval tier
+    with empty intervals for pauses, spanning 0 to `duration` (default: the last word's end).
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        payload = {"words": [{"word": w.text, "start": round(w.start, 6), "end": round(w.end, 6)}
+                             for w in words]}
+        content = json.dumps(payload, indent=1, ensure_ascii=False) + "\n"
+    elif suffix == ".textgrid":
+        content = _textgrid(words, duration)
+    elif suffix == ".csv":
+        lines = ["word,start,end"] + [f"{_csv_cell(w.text)},{w.start:.6f},{w.end:.6f}" for w in words]
+        content = "\n".join(lines) + "\n"
+    else:
+        raise FacegenError(f"cannot write alignment {path}: use a .json, .TextGrid or .csv file name")
+    with atomic_path(path) as tmp:
+        tmp.write_text(content, encoding="utf-8")
+    return path
+
+
+def _csv_cell(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
+
+
+def _textgrid(words: list[Word], duration: float | None) -> str:
+    end = max([duration or 0.0] + [w.end for w in words])
+    intervals: list[tuple[float, float, str]] = []
+    t = 0.0
+    for w in words:
+        if w.start > t + 1e-9:
+            intervals.append((t, w.start, ""))
+        intervals.append((max(w.start, t), w.end, w.text))
+        t = w.end
+    if end > t + 1e-9 or not intervals:
+        intervals.append((t, end, ""))
+    lines = ['File type = "ooTextFile"', 'Object class = "TextGrid"', "", "xmin = 0", f"xmax = {end:.6f}",
+             "tiers? <exists>", "size = 1", "item []:", "    item [1]:", '        class = "IntervalTier"',
+             '        name = "words"', "        xmin = 0", f"        xmax = {end:.6f}",
+             f"        intervals: size = {len(intervals)}"]
+    for k, (a, b, label) in enumerate(intervals, 1):
+        quoted = label.replace('"', '""')
+        lines += [f"        intervals [{k}]:", f"            xmin = {a:.6f}", f"            xmax = {b:.6f}",
+                  f'            text = "{quoted}"']
+    return "\n".join(lines) + "\n"

@@ -175,12 +175,43 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray, out: np.ndarray) ->
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
+def _to_view(vertices: np.ndarray, normals: np.ndarray, eye: np.ndarray, rotation: np.ndarray, focal: float,
+             centre: float, xy: np.ndarray, inv_depth: np.ndarray, view_normals: np.ndarray) -> None:
+    """Camera.project for the rasteriser (xy pixels, 1/depth or -1 behind the camera) and the normals
+    in view space (x right, y up, z towards the viewer)."""
+    for i in range(vertices.shape[0]):
+        px = vertices[i, 0] - eye[0]
+        py = vertices[i, 1] - eye[1]
+        pz = vertices[i, 2] - eye[2]
+        x = rotation[0, 0] * px + rotation[0, 1] * py + rotation[0, 2] * pz
+        y = rotation[1, 0] * px + rotation[1, 1] * py + rotation[1, 2] * pz
+        z = rotation[2, 0] * px + rotation[2, 1] * py + rotation[2, 2] * pz
+        if z > 1e-6:
+            inv_depth[i] = 1.0 / z
+            xy[i, 0] = centre + focal * x / z
+            xy[i, 1] = centre - focal * y / z
+        else:
+            inv_depth[i] = -1.0
+            xy[i, 0] = 0.0
+            xy[i, 1] = 0.0
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        view_normals[i, 0] = rotation[0, 0] * nx + rotation[0, 1] * ny + rotation[0, 2] * nz
+        view_normals[i, 1] = rotation[1, 0] * nx + rotation[1, 1] * ny + rotation[1, 2] * nz
+        view_normals[i, 2] = -(rotation[2, 0] * nx + rotation[2, 1] * ny + rotation[2, 2] * nz)
+
+
+SUBPIXEL = 256  # vertex positions snap to 1/256 pixel: exact integer edge functions
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def _rasterize(xy: np.ndarray, inv_depth: np.ndarray, faces: np.ndarray,
                tri: np.ndarray, bary: np.ndarray, zbuf: np.ndarray) -> None:
     """Z-buffer the triangles: per pixel, the nearest triangle and its perspective-correct barycentrics.
 
     xy: [V, 2] pixel coordinates, inv_depth: [V] 1/depth (<= 0 behind the camera), tri: [H, W] out
     (-1 = background), bary: [H, W, 2] out (weights of the first two corners), zbuf: [H, W] scratch.
+    Edge functions are evaluated in integers on positions snapped to 1/SUBPIXEL pixel, so two triangles
+    that share an edge never both miss a pixel centre on it (no cracks), as on a GPU.
     """
     height, width = tri.shape
     zbuf[:] = 0.0
@@ -195,30 +226,37 @@ def _rasterize(xy: np.ndarray, inv_depth: np.ndarray, faces: np.ndarray,
         lo_y, hi_y = min(y0, y1, y2) - 0.5, max(y0, y1, y2) - 0.5
         if not (hi_x >= 0.0 and lo_x <= width - 1 and hi_y >= 0.0 and lo_y <= height - 1):
             continue  # off screen (or NaN)
-        area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        if area == 0.0:
+        X0, Y0 = np.int64(math.floor(x0 * SUBPIXEL + 0.5)), np.int64(math.floor(y0 * SUBPIXEL + 0.5))
+        X1, Y1 = np.int64(math.floor(x1 * SUBPIXEL + 0.5)), np.int64(math.floor(y1 * SUBPIXEL + 0.5))
+        X2, Y2 = np.int64(math.floor(x2 * SUBPIXEL + 0.5)), np.int64(math.floor(y2 * SUBPIXEL + 0.5))
+        area = (X1 - X0) * (Y2 - Y0) - (X2 - X0) * (Y1 - Y0)
+        if area == 0:
             continue
-        inv_area = 1.0 / area
+        sign = np.int64(1) if area > 0 else np.int64(-1)
+        inv_area = 1.0 / (area * sign)
         xmin, xmax = max(math.ceil(lo_x), 0), min(math.floor(hi_x), width - 1)
         ymin, ymax = max(math.ceil(lo_y), 0), min(math.floor(hi_y), height - 1)
-        # barycentric weights of corners a and b are linear in the pixel centre: w = A x + B y + C
-        a0, b0, c0 = (y1 - y2) * inv_area, (x2 - x1) * inv_area, (x1 * y2 - x2 * y1) * inv_area
-        a1, b1, c1 = (y2 - y0) * inv_area, (x0 - x2) * inv_area, (x2 * y0 - x0 * y2) * inv_area
+        # edge function of corner k at pixel centre (cx, cy), times sign: >= 0 on the triangle's side
+        step0, step1, step2 = (Y1 - Y2) * SUBPIXEL * sign, (Y2 - Y0) * SUBPIXEL * sign, (Y0 - Y1) * SUBPIXEL * sign
+        cx = xmin * SUBPIXEL + SUBPIXEL // 2
         da, db = za - zc, zb - zc
         for py in range(ymin, ymax + 1):
-            cy = py + 0.5
-            w0 = a0 * (xmin + 0.5) + b0 * cy + c0
-            w1 = a1 * (xmin + 0.5) + b1 * cy + c1
+            cy = py * SUBPIXEL + SUBPIXEL // 2
+            e0 = ((X1 - cx) * (Y2 - cy) - (X2 - cx) * (Y1 - cy)) * sign
+            e1 = ((X2 - cx) * (Y0 - cy) - (X0 - cx) * (Y2 - cy)) * sign
+            e2 = ((X0 - cx) * (Y1 - cy) - (X1 - cx) * (Y0 - cy)) * sign
             for px in range(xmin, xmax + 1):
-                if w0 >= 0.0 and w1 >= 0.0 and w0 + w1 <= 1.0:
+                if e0 >= 0 and e1 >= 0 and e2 >= 0:
+                    w0, w1 = e0 * inv_area, e1 * inv_area
                     iz = zc + w0 * da + w1 * db  # 1/depth is linear in screen space
                     if iz > zbuf[py, px]:
                         zbuf[py, px] = iz
                         tri[py, px] = f
                         bary[py, px, 0] = w0 * za / iz  # perspective-correct
                         bary[py, px, 1] = w1 * zb / iz
-                w0 += a0
-                w1 += a1
+                e0 += step0
+                e1 += step1
+                e2 += step2
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
@@ -338,11 +376,16 @@ class Renderer:
 
     def __init__(self, faces: np.ndarray, template: np.ndarray, size: int = 512,
                  views: Sequence[str] = DEFAULT_VIEWS, supersample: int = 2) -> None:
-        self.faces = np.ascontiguousarray(faces, np.int32)
         self.size = check_size(size)
         self.views = check_views(views)
         self.cameras = frame_cameras(template, self.views, self.size)
         self.ss = max(1, int(supersample))
+        # triangles in screen order (16-pixel bands of the first view, left to right): neighbouring
+        # triangles are drawn one after another, so the z-buffer stays in cache (~25% faster for BIWI)
+        faces = np.ascontiguousarray(faces, np.int32)
+        centres, _ = self.cameras[0].project(np.asarray(template, np.float64)[faces].mean(1))
+        centres = np.nan_to_num(centres)
+        self.faces = np.ascontiguousarray(faces[np.lexsort((centres[:, 0], centres[:, 1] // 16))])
         self.lights = _lights()
         self.background = srgb_to_linear(BACKGROUND)
         self.skin = srgb_to_linear(SKIN)
@@ -375,13 +418,13 @@ class Renderer:
         normals = np.empty_like(vertices)
         _vertex_normals(vertices, self.faces, normals)
         tri, bary, zbuf = self._buffers()
+        xy = np.empty((len(vertices), 2), np.float32)
+        inv_depth = np.empty(len(vertices), np.float32)
+        view_normals = np.empty_like(vertices)
         for k, cam in enumerate(self.cameras):
-            scaled = Camera(cam.eye, cam.rotation, cam.focal * self.ss, cam.size * self.ss)
-            xy, depth = scaled.project(vertices)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                inv_depth = np.where(depth > 1e-6, 1.0 / depth, -1.0).astype(np.float32)
-            _rasterize(xy.astype(np.float32), inv_depth, self.faces, tri, bary, zbuf)
-            view_normals = (normals @ (cam.rotation * np.array([[1.0], [1.0], [-1.0]])).T).astype(np.float32)
+            _to_view(vertices, normals, cam.eye.astype(np.float32), cam.rotation.astype(np.float32),
+                     cam.focal * self.ss, cam.size * self.ss / 2, xy, inv_depth, view_normals)
+            _rasterize(xy, inv_depth, self.faces, tri, bary, zbuf)
             _shade(tri, bary, self.faces, view_normals, linear, self.lights, self.background, self.srgb, self.ss,
                    out[:, k * self.size:(k + 1) * self.size])
 
@@ -463,23 +506,33 @@ def text_width(text: str, scale: int = 2) -> int:
     return 6 * scale * len(text) - scale
 
 
-def _draw_compare_overlay(frame: np.ndarray, size: int, views: int, vmax: float, face_size: float,
-                          labels: tuple[str, str]) -> None:
-    """Title strip (A | B) and the colour bar with its scale, drawn over the top and bottom margins."""
+def compare_overlay(size: int, views: int, vmax: float, face_size: float,
+                    labels: tuple[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The compare video's captions, drawn once: pixel rows, columns and their RGB colours.
+
+    A title strip names A and B at the top of each half; a line at the bottom of B's half shows the colour
+    bar and its scale: "|A-B|  0 [bar] 0.0123 = 0.92% OF FACE SIZE".
+    """
+    canvas = np.zeros((size, 2 * size * views, 3), np.uint8)
+    drawn = np.zeros(canvas.shape[:2], bool)
     scale = max(1, size // 256)
-    half = size * views
-    pad = 4 * scale
-    draw_text(frame, labels[0], pad, pad, scale)
-    draw_text(frame, labels[1], half + pad, pad, scale)
-    bar_h = 4 * scale
-    bar_y = size - pad - 7 * scale - pad - bar_h
-    left, right = half + pad, 2 * half - pad
-    ramp = heat_colors(np.linspace(0, 1, right - left), 1.0)
-    frame[bar_y:bar_y + bar_h, left:right] = (ramp * 255 + 0.5).astype(np.uint8)[None]
-    text_y = bar_y + bar_h + pad
-    draw_text(frame, "0", left, text_y, scale)
+    half, pad, line = size * views, 4 * scale, 7 * scale
+    fit = max(1, (half - 2 * pad) // (6 * scale))  # characters that fit in a half
+    draw_text(canvas, labels[0][:fit], pad, pad, scale)
+    draw_text(canvas, labels[1][:fit], half + pad, pad, scale)
+    y = size - pad - line
     top = f"{_short(vmax)} = {100 * vmax / face_size:.2g}% OF FACE SIZE" if face_size > 0 else _short(vmax)
-    draw_text(frame, top, right - text_width(top, scale), text_y, scale)
+    left = draw_text(canvas, "|A-B|  0", half + pad, y, scale) + 2 * scale
+    right = 2 * half - pad - text_width(top, scale)
+    draw_text(canvas, top, right, y, scale)
+    drawn[:] = canvas.any(-1)
+    right -= 3 * scale
+    if right - left > 8:
+        ramp = heat_colors(np.linspace(0, 1, right - left), 1.0)
+        canvas[y + scale:y + line - scale, left:right] = (ramp * 255 + 0.5).astype(np.uint8)[None]
+        drawn[y + scale:y + line - scale, left:right] = True
+    ys, xs = np.nonzero(drawn)
+    return ys, xs, canvas[ys, xs]
 
 
 def _short(value: float) -> str:
@@ -635,12 +688,15 @@ def render_animation(anim: Animation, path: str | os.PathLike, *, size: int = 51
         _check_finite(compare, "the comparison animation")
         frames = _check_comparable(anim, compare, labels, notes)
         errors = np.linalg.norm(anim.vertices[:frames] - compare.vertices[:frames], axis=-1)  # [T, V]
+        if error_scale is not None and not error_scale > 0:
+            raise FacegenError(f"the error scale must be a positive distance, got {error_scale}")
         vmax = float(error_scale) if error_scale is not None else float(errors.max())
         if not vmax > 0:
             vmax = max(anim.size, 1e-12) * 1e-3  # identical clips: any positive scale shows all grey
             notes.append("the two animations are identical")
         if anim.audio is None and compare.audio is not None:
             audio_source = compare
+        overlay = compare_overlay(renderer.size, len(renderer.views), vmax, anim.size, labels)
     width = renderer.width * (2 if compare is not None else 1)
     height = renderer.size
     threads = default_threads() if threads is None else max(1, int(threads))
@@ -650,7 +706,7 @@ def render_animation(anim: Animation, path: str | os.PathLike, *, size: int = 51
         renderer.render_into(anim.vertices[t], frame[:, :renderer.width])
         if compare is not None:
             renderer.render_into(compare.vertices[t], frame[:, renderer.width:], heat_colors(errors[t], vmax))
-            _draw_compare_overlay(frame, renderer.size, len(renderer.views), vmax, anim.size, labels)
+            frame[overlay[0], overlay[1]] = overlay[2]
         return frame
 
     audio = _clip_audio(audio_source, frames)

@@ -45,6 +45,7 @@ from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig
 CHECKPOINT = "checkpoint.safetensors"
 CHECKPOINT_VERSION = 1
 MIN_MEL_STD = 1.0  # dB: a mel band that barely varies in training is not amplified
+PNG_EVERY = 30.0  # seconds between redraws of loss.png during training (it is always drawn at the end)
 
 
 @dataclass
@@ -153,7 +154,7 @@ def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: lis
     for step, index in enumerate(order):
         batch = batches[index]
         loss = batch.loss(model)
-        value = float(loss)
+        value = float(loss.detach())
         if not math.isfinite(value):
             raise _NonFinite(batch.item.name, value)
         (loss / batch_size if batch_size > 1 else loss).backward()
@@ -235,14 +236,16 @@ def _restore(tensors: dict[str, torch.Tensor], meta: dict, model: FaceModel,
 
 
 # ------------------------------------------------------------------------------------------ curves
-def write_curves(history: list[dict], folder: Path) -> tuple[Path, Path | None]:
-    """loss.csv and (when matplotlib is installed) loss.png in `folder`."""
+def write_curves(history: list[dict], folder: Path, png: bool = True) -> tuple[Path, Path | None]:
+    """loss.csv and (with `png`, when matplotlib is installed) loss.png in `folder`."""
     csv_path = folder / "loss.csv"
     with atomic_path(csv_path) as tmp, open(tmp, "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["epoch", "train_loss", "val_loss", "seconds"])
         for h in history:
             writer.writerow([h["epoch"], f"{h['train_loss']:.6e}", f"{h['val_loss']:.6e}", f"{h['seconds']:.2f}"])
+    if not png:
+        return csv_path, None
     try:
         import matplotlib
 
@@ -405,7 +408,7 @@ def train(
                        if it.subject in speaker_of]
         say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
             f"{len(val_batches)}, {epochs} epochs, device {dev}")
-        run_start = time.perf_counter()
+        run_start = last_png = time.perf_counter()
         epochs_run = 0
         from tqdm import tqdm
 
@@ -436,7 +439,11 @@ def train(
             save_checkpoint(ckpt_path, model, best_state, optimizer, {
                 "signature": signature, "epoch": epoch + 1, "history": history, "best_epoch": best_epoch,
                 "best_loss": best_loss, "seconds": seconds})
-            csv_path, png_path = write_curves(history, ckpt_dir)
+            if time.perf_counter() - last_png > PNG_EVERY:  # drawing takes ~0.3 s: not after every short epoch
+                write_curves(history, ckpt_dir)
+                last_png = time.perf_counter()
+            else:
+                write_curves(history, ckpt_dir, png=False)
             if not quiet:
                 tqdm.write(f"facegen: epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  val {val_loss:.4e}  "
                            f"({history[-1]['seconds']:.1f} s){'  best' if improved else ''}", file=sys.stderr)

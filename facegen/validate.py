@@ -1,4 +1,4 @@
-"""Checks on written animation assets (USD and .npy): `validate(path) -> Report`.
+"""Checks on written animation assets (USD, USDZ and .npy): `validate(path) -> Report`.
 
 Each check has a name, ok, a one-line detail and a severity. An "error" check that fails makes the report
 fail; a "warning" is shown but never fails it (pxr validators' warnings are warnings, their errors are
@@ -12,12 +12,20 @@ errors; facegen's own checks are errors). The checks:
                   triangles whose indices are in range
   frame rate      USD: timeCodesPerSecond authored, equal to framesPerSecond and to `fps` when given
   time samples    USD: points sampled exactly at 0, 1, ..., T-1, stage start/end 0 and T-1, an extent
-                  sample per frame that contains the frame's points
+                  sample per frame that contains the frame's points (blendshapes: blendShapeWeights
+                  sampled at 0, 1, ..., T-1, one weight per blend shape in each sample)
+  blendshapes     USD blendshapes files (a mesh bound to UsdSkel blend shapes, no points samples): the
+                  frames are blended from the BlendShape offsets and weights, every other check runs on
+                  them; the skel binding is complete and UsdSkel's own evaluation at the middle frame
+                  equals the blend
+  reconstruction  USD blendshapes: the error facegen stated in customLayerData is within its tolerance
+  package         USDZ: the package's files (the root layer first, its WAV), the audio resolves inside it
   finite          no NaN or infinite coordinate
   displacement    no vertex moves further than `max_displacement` x the rest pose's bounding-box
                   diagonal from its rest position (rest = template, else the file's rest pose, else frame 0)
   audio           the audio is attached and readable (USD: the SpatialAudio prim's file resolves relative
-                  to the layer; .npy: the WAV sidecar beside it); `audio_path` replaces it when given
+                  to the layer, or inside the .usdz; .npy: the WAV sidecar beside it); `audio_path`
+                  replaces it when given
   audio duration  the frame count matches the audio's duration x fps within one frame
   usd:<validator> pxr's UsdValidation validators (all registered), one check per error or warning
 """
@@ -37,11 +45,14 @@ import numpy as np
 from facegen.errors import FacegenError
 from facegen.exchange import npy as npy_format
 from facegen.exchange import usd as usd_format
+from facegen.exchange import usd_skel
+from facegen.exchange import usdz as usdz_format
 from facegen.exchange.wav import read_wav, sidecar_path
 from facegen.mesh import Mesh
 
 DEFAULT_MAX_DISPLACEMENT = 0.25
 DEFAULT_FPS = 25.0
+SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend, as a fraction of the face size (float32 sums)
 
 
 @dataclass
@@ -112,12 +123,12 @@ def validate(
     path = Path(path)
     report = Report(str(path))
     suffix = path.suffix.lower()
-    if suffix in usd_format.EXTENSIONS:
+    if suffix in usd_format.EXTENSIONS + usdz_format.EXTENSIONS:
         _validate_usd(report, path, template, fps, audio_path, require_audio, max_displacement)
     elif suffix in npy_format.EXTENSIONS:
         _validate_npy(report, path, template, fps, audio_path, require_audio, max_displacement)
     else:
-        exts = ", ".join(usd_format.EXTENSIONS + npy_format.EXTENSIONS)
+        exts = ", ".join(usd_format.EXTENSIONS + usdz_format.EXTENSIONS + npy_format.EXTENSIONS)
         report.add("file", False, f"cannot validate {suffix or 'files without extension'}: use one of {exts}")
     return report
 
@@ -139,16 +150,23 @@ def _validate_usd(report, path, template, fps, audio_path, require_audio, max_di
         _usd_validators(report, stage)
         return
 
-    times, frames = usd_format.points_samples(mesh)
+    if path.suffix.lower() in usdz_format.EXTENSIONS:
+        _check_package(report, path, stage)
     rest = usd_format.rest_points(mesh)
-    own = rest if rest is not None else (frames[0] if frames else None)
+    blended = not mesh.GetPointsAttr().GetNumTimeSamples() and usd_skel.has_blendshapes(mesh)
+    if blended:
+        times, frames = _blendshape_frames(report, stage, mesh, rest)
+    else:
+        times, frames = usd_format.points_samples(mesh)
+    own = rest if rest is not None else (frames[0] if len(frames) else None)
     expected = template.num_vertices if template is not None else (len(own) if own is not None else None)
     source = (
         "the template" if template is not None else "the file's rest pose" if rest is not None else "frame 0"
     )
     counts = sorted({len(f) for f in frames})
-    if not frames:
-        report.add("vertex count", False, "the mesh has no points time samples")
+    if len(frames) == 0:
+        what = "blend shape frames" if blended else "points time samples"
+        report.add("vertex count", False, f"the mesh has no {what}")
     else:
         wrong = [i for i, f in enumerate(frames) if len(f) != expected]
         report.add(
@@ -184,7 +202,7 @@ def _validate_usd(report, path, template, fps, audio_path, require_audio, max_di
         )
     rate = file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS
 
-    _check_time_samples(report, stage, mesh, times)
+    _check_time_samples(report, stage, mesh, times, "blendShapeWeights" if blended else "points")
     _check_values(report, frames if counts == [expected] else [], own, template, max_displacement)
 
     audio = None
@@ -198,11 +216,69 @@ def _validate_usd(report, path, template, fps, audio_path, require_audio, max_di
         if not resolved:
             report.add("audio", False, f"{sound.GetPath()} refers to {asset!r}, which does not resolve")
         else:
-            audio = _read_audio(report, "audio", resolved, f"{sound.GetPath()} -> {asset}")
+            audio = _read_audio(
+                report, "audio", resolved, f"{sound.GetPath()} -> {asset}", usd_format.read_audio_asset
+            )
     if audio_path is not None:
         audio = _read_audio(report, "audio file", audio_path, str(audio_path))
     _check_duration(report, len(frames), rate, audio, require_audio)
     _usd_validators(report, stage)
+
+
+def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], np.ndarray | list]:
+    """The frames of a blendshapes file (the "blendshapes" check), then the "reconstruction" check."""
+    try:
+        if rest is None:
+            raise FacegenError(f"mesh {mesh.GetPath()} has blend shapes but no points to apply them to")
+        times, frames = usd_skel.blendshape_frames(stage, mesh, rest)
+        names, _ = usd_skel.blend_targets(stage, mesh, len(rest))
+        middle = len(times) // 2
+        evaluated = usd_skel.skel_points(stage, mesh, times[middle])
+    except FacegenError as exc:
+        report.add("blendshapes", False, str(exc))
+        return [], []
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    diff = float(np.sqrt(((evaluated.astype(np.float64) - frames[middle]) ** 2).sum(1)).max())
+    report.add(
+        "blendshapes",
+        diff <= SKEL_AGREEMENT * size,
+        f"{usd_skel.describe(names)} x {len(times)} frames; UsdSkel's evaluation at time {times[middle]:g} "
+        f"is {diff:.2g} from the blend" + ("" if diff <= SKEL_AGREEMENT * size else " (they disagree)"),
+    )
+    info = stage.GetRootLayer().customLayerData.get("facegen", {})
+    stated = info.get("reconstruction") if isinstance(info, dict) else None
+    if isinstance(stated, dict) and "relative_error" in stated:
+        error, tolerance = float(stated["relative_error"]), stated.get("tolerance")
+        ok = tolerance is None or error <= float(tolerance)
+        report.add(
+            "reconstruction",
+            ok,
+            f"largest vertex error {float(stated.get('max_error', float('nan'))):.3g} = {error:.3g} of the face "
+            f"size" + ("" if tolerance is None else f"; tolerance {float(tolerance):g}")
+            + ("" if ok else " (over the tolerance)"),
+        )
+    return times, frames
+
+
+def _check_package(report: Report, path: Path, stage) -> None:
+    """A .usdz: its files (root layer first), and its audio resolving inside it rather than beside it."""
+    from pxr import Ar
+
+    try:
+        names = usdz_format.contents(path)
+    except FacegenError as exc:
+        report.add("package", False, str(exc))
+        return
+    problems = []
+    if not names or Path(names[0]).suffix.lower() not in usd_format.EXTENSIONS:
+        problems.append("the first file is not a USD layer")
+    sound = usd_format.find_audio(stage)
+    if sound is not None:
+        asset, resolved = usd_format.audio_file(sound)
+        outer = Ar.SplitPackageRelativePathOuter(resolved)[0] if Ar.IsPackageRelativePath(resolved) else ""
+        if not outer or Path(outer).resolve() != path.resolve():
+            problems.append(f"the audio {asset!r} does not resolve inside the package")
+    report.add("package", not problems, f"holds {', '.join(names)}" + ("; " + "; ".join(problems) if problems else ""))
 
 
 def _check_faces(report: Report, faces: np.ndarray, template: Mesh | None, num_vertices: int | None) -> None:
@@ -223,20 +299,23 @@ def _check_faces(report: Report, faces: np.ndarray, template: Mesh | None, num_v
         )
 
 
-def _check_time_samples(report: Report, stage, mesh, times: list[float]) -> None:
+def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points") -> None:
+    """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame."""
     from pxr import UsdGeom
 
     count = len(times)
     problems = []
     if times != [float(i) for i in range(count)]:
         shown = ", ".join(f"{t:g}" for t in times[:4]) + (", ..." if count > 4 else "")
-        problems.append(f"points sampled at {shown} instead of 0, 1, ..., {count - 1}")
+        problems.append(f"{what} sampled at {shown} instead of 0, 1, ..., {count - 1}")
     if count and (stage.GetStartTimeCode() != 0 or stage.GetEndTimeCode() != count - 1):
         problems.append(
             f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected 0..{count - 1}"
         )
     extent = mesh.GetExtentAttr()
-    if list(extent.GetTimeSamples()) != times:
+    if what != "points":
+        pass  # blend shapes deform the rest pose; its extent is the mesh's (unsampled) extent
+    elif list(extent.GetTimeSamples()) != times:
         problems.append("extent is not sampled at the same times as points")
     else:
         points = mesh.GetPointsAttr()
@@ -293,9 +372,9 @@ def _check_values(
     )
 
 
-def _read_audio(report: Report, name: str, path, shown: str) -> tuple[np.ndarray, int] | None:
+def _read_audio(report: Report, name: str, path, shown: str, reader=read_wav) -> tuple[np.ndarray, int] | None:
     try:
-        samples, rate = read_wav(path)
+        samples, rate = reader(path)
     except FacegenError as exc:
         report.add(name, False, f"{shown}: {exc}")
         return None

@@ -29,7 +29,7 @@ def toy(tmp_path_factory):
 
 def _train(toy, out, **kw):
     options = {"modalities": "audio", "epochs": 2, "lr": 3e-3, "splits": TOY_SPLITS, "device": "cpu",
-               "model_options": SMALL, "quiet": True, "cache_dir": toy / ".cache", "threads": 2}
+               "model_options": SMALL, "quiet": True, "cache_dir": toy / ".cache", "threads": 1}
     options.update(kw)
     return train(toy, out, **options)
 

@@ -28,6 +28,9 @@ FORMATS: dict[str, str] = {
     ".usdc": "facegen.exchange.usd",
     ".usd": "facegen.exchange.usd",
     ".npy": "facegen.exchange.npy",
+    ".glb": "facegen.exchange.gltf",
+    ".gltf": "facegen.exchange.gltf",
+    ".usdz": "facegen.exchange.usdz",
 }
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from facegen.animation import Animation
 from facegen.errors import FacegenError
@@ -68,7 +69,7 @@ def morph_basis(
 ) -> MorphBasis:
     """Morph targets for `anim`: `k=None` picks the fewest meeting `tolerance`; an int fixes K;
     "all" makes one target per frame (exact; refused beyond MAX_FRAME_TARGETS frames)."""
-    offsets = _offsets(anim)
+    frames, template = _frames(anim)
     size = float(anim.size)
     if isinstance(k, str):
         if k.strip().lower() != "all":
@@ -78,47 +79,60 @@ def morph_basis(
         raise FacegenError(f"the number of morph targets must be a whole number >= 1, got {k}")
     if not tolerance > 0:
         raise FacegenError(f"the morph target tolerance must be positive, got {tolerance}")
-    T = offsets.shape[0]
-    flat = offsets.reshape(T, -1)
-    bound = tolerance * size
+    T = frames.shape[0]
+    flat = frames.reshape(T, -1)
+    shift = template.reshape(-1)
     rng = np.random.default_rng(seed)
-    if k is not None:
-        k = min(int(k), T)
-        temporal, coeffs = _principal_components(flat, min(T, k + _OVERSAMPLE), rng)
-        return _finish(flat, temporal[:, :k], coeffs[:k], size, None, unit_weights)
+    with threadpool_limits(1, user_api="blas"):  # many small products: threads only add waiting
+        if k is not None:
+            k = min(int(k), T)
+            temporal, coeffs = _principal_components(flat, shift, min(T, k + _OVERSAMPLE), rng)
+            return _finish(flat, shift, temporal[:, :k], coeffs[:k], size, None, unit_weights)
+        return _search(flat, shift, size, tolerance, unit_weights, rng)
+
+
+def _search(
+    flat: np.ndarray, shift: np.ndarray, size: float, tolerance: float, unit_weights: bool,
+    rng: np.random.Generator,
+) -> MorphBasis:
+    """The fewest components within tolerance x size, growing the range finder until they exist."""
+    T = flat.shape[0]
+    bound = tolerance * size
     rank = min(T, _FIRST_RANK)
     rows = np.unique(np.linspace(0, T - 1, min(T, _SEARCH_FRAMES)).round().astype(np.int64))
     while True:
-        temporal, coeffs = _principal_components(flat, rank, rng)
+        temporal, coeffs = _principal_components(flat, shift, rank, rng)
         usable = temporal.shape[1] if rank >= T else max(1, temporal.shape[1] - _OVERSAMPLE // 2)
-        guess = _smallest_k(flat[rows], temporal[rows], coeffs, 1, usable, bound)  # a lower bound, cheap
-        k = None if guess is None else _smallest_k(flat, temporal, coeffs, guess, usable, bound, gallop=True)
+        # K on a subset of frames is a lower bound (cheap); then confirm on every frame from there
+        guess = _smallest_k(flat[rows], shift, temporal[rows], coeffs, 1, usable, bound)
+        k = None if guess is None else _smallest_k(flat, shift, temporal, coeffs, guess, usable, bound, gallop=True)
         if k is not None:
             while True:
-                basis = _finish(flat, temporal[:, :k], coeffs[:k], size, tolerance, unit_weights)
+                basis = _finish(flat, shift, temporal[:, :k], coeffs[:k], size, tolerance, unit_weights)
                 if basis.max_error <= bound or k >= usable:
                     return basis
                 k += 1  # rescaling the weights moved the error over the bound by rounding
         if rank >= T:  # every component is in and the tolerance is still not met (float32 rounding)
-            return _finish(flat, temporal, coeffs, size, tolerance, unit_weights)
+            return _finish(flat, shift, temporal, coeffs, size, tolerance, unit_weights)
         rank = min(T, 2 * rank)
 
 
 def frame_basis(anim: Animation, tolerance: float | None = None) -> MorphBasis:
     """One target per frame (each frame's offsets) and one-hot weights: exact at every frame."""
-    offsets = _offsets(anim)
-    T = offsets.shape[0]
+    frames, template = _frames(anim)
+    T = frames.shape[0]
     if T > MAX_FRAME_TARGETS:
         raise FacegenError(
             f"one morph target per frame ('all') is for clips of at most {MAX_FRAME_TARGETS} frames, and this "
             f"one has {T}: {suggest_k(anim, tolerance or DEFAULT_TOLERANCE)} or leave the option out"
         )
+    offsets = frames - template[None]
     flat = offsets.reshape(T, -1)
     return MorphBasis(
-        targets=offsets.copy(),
+        targets=offsets,
         weights=np.eye(T, dtype=np.float32),
         rest=np.zeros(offsets.shape[1:], np.float32),
-        max_error=_max_error(flat, np.eye(T, dtype=np.float32), flat, None),
+        max_error=_max_error(frames.reshape(T, -1), np.eye(T, dtype=np.float32), flat, template.reshape(-1)),
         size=float(anim.size),
         tolerance=None,
         names=[f"frame_{t:05d}" for t in range(T)],
@@ -133,50 +147,58 @@ def suggest_k(anim: Animation, tolerance: float = DEFAULT_TOLERANCE) -> str:
 
 def max_vertex_error(anim: Animation, basis: MorphBasis) -> float:
     """The largest distance between a vertex of `anim` and its reconstruction from `basis`."""
-    flat = _offsets(anim).reshape(anim.num_frames, -1)
-    return _max_error(flat, basis.weights, basis.targets.reshape(basis.k, -1), basis.rest.reshape(-1))
+    frames, template = _frames(anim)
+    rest = (template + basis.rest).reshape(-1)
+    return _max_error(frames.reshape(len(frames), -1), basis.weights, basis.targets.reshape(basis.k, -1), rest)
 
 
 # ---- internals ---------------------------------------------------------------------------------------
 
 
-def _offsets(anim: Animation) -> np.ndarray:
-    vertices = np.asarray(anim.vertices, dtype=np.float32)
-    template = np.asarray(anim.template, dtype=np.float32)
+def _frames(anim: Animation) -> tuple[np.ndarray, np.ndarray]:
+    """The animation's [T, V, 3] float32 frames (no copy when they already are) and its template."""
+    vertices = np.ascontiguousarray(anim.vertices, dtype=np.float32)
+    template = np.ascontiguousarray(anim.template, dtype=np.float32)
     if vertices.ndim != 3 or vertices.shape[1:] != template.shape or vertices.shape[0] == 0:
         raise FacegenError(f"animation vertices {list(vertices.shape)} do not match the template {list(template.shape)}")
     if not (np.isfinite(vertices).all() and np.isfinite(template).all()):
         raise FacegenError("the animation has NaN or infinite vertex coordinates: nothing sensible can be stored")
-    return vertices - template[None]
+    return vertices, template
 
 
-def _principal_components(flat: np.ndarray, rank: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """(temporal [T, r] orthonormal, coefficients [r, 3V]) with flat ~= temporal @ coefficients,
-    components ordered by decreasing singular value."""
+def _principal_components(
+    flat: np.ndarray, shift: np.ndarray, rank: int, rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(temporal [T, r] orthonormal, coefficients [r, 3V]) with flat - shift ~= temporal @ coefficients,
+    components ordered by decreasing singular value. The offsets flat - shift are never materialised."""
     T = flat.shape[0]
+    ones = np.ones(T, np.float32)
     if rank >= T:
         basis = np.eye(T, dtype=np.float32)  # the full column space: exact
     else:
         probe = rng.standard_normal((flat.shape[1], rank), dtype=np.float32)
-        basis, _ = np.linalg.qr(flat @ probe)
+        sample = flat @ probe
+        sample -= np.outer(ones, shift @ probe)
+        basis, _ = np.linalg.qr(sample)
     small = basis.T @ flat  # [r, 3V]
+    small -= np.outer(basis.T @ ones, shift)
     gram = (small @ small.T).astype(np.float64)
     values, vectors = np.linalg.eigh(gram)
     order = np.argsort(values)[::-1]
     keep = order[values[order] > values.max() * 1e-12] if values.max() > 0 else order[:1]
     vectors = vectors[:, keep].astype(np.float32)
-    return basis @ vectors, vectors.T @ small
+    return np.ascontiguousarray(basis @ vectors), vectors.T @ small
 
 
 def _smallest_k(
-    flat: np.ndarray, temporal: np.ndarray, coeffs: np.ndarray, low: int, high: int, bound: float,
-    gallop: bool = False,
+    flat: np.ndarray, shift: np.ndarray, temporal: np.ndarray, coeffs: np.ndarray, low: int, high: int,
+    bound: float, gallop: bool = False,
 ) -> int | None:
     """The fewest leading components (in low..high) whose error on these rows is within `bound`; None
     when even `high` is not. With `gallop`, K is expected near `low`: try low, low+1, low+3, ... first."""
 
     def ok(k: int) -> bool:
-        return _max_error(flat, temporal[:, :k], coeffs[:k], None) <= bound
+        return _max_error(flat, temporal[:, :k], coeffs[:k], shift) <= bound
 
     if gallop:
         step, k = 1, low
@@ -197,8 +219,8 @@ def _smallest_k(
 
 
 def _finish(
-    flat: np.ndarray, temporal: np.ndarray, coeffs: np.ndarray, size: float, tolerance: float | None,
-    unit_weights: bool,
+    flat: np.ndarray, shift: np.ndarray, temporal: np.ndarray, coeffs: np.ndarray, size: float,
+    tolerance: float | None, unit_weights: bool,
 ) -> MorphBasis:
     """Store the first K components as float32 targets and weights and measure their real error."""
     weights = np.ascontiguousarray(temporal, dtype=np.float32)
@@ -221,14 +243,14 @@ def _finish(
         targets=targets.reshape(K, -1, 3),
         weights=weights,
         rest=rest.reshape(-1, 3),
-        max_error=_max_error(flat, weights, targets, rest),
+        max_error=_max_error(flat, weights, targets, rest + shift),
         size=size,
         tolerance=tolerance,
         names=[f"pca_{i:03d}" for i in range(K)],
     )
 
 
-def _max_error(flat: np.ndarray, weights: np.ndarray, targets: np.ndarray, rest: np.ndarray | None) -> float:
+def _max_error(flat: np.ndarray, weights: np.ndarray, targets: np.ndarray, rest: np.ndarray) -> float:
     """max over frames and vertices of |flat - (rest + weights @ targets)| per vertex, in blocks."""
     T, width = flat.shape
     weights = np.ascontiguousarray(weights, dtype=np.float32)
@@ -238,8 +260,7 @@ def _max_error(flat: np.ndarray, weights: np.ndarray, targets: np.ndarray, rest:
         stop = min(start + _CHUNK, width)
         block = buf[:, : stop - start]
         np.matmul(weights, targets[:, start:stop], out=block)
-        if rest is not None:
-            block += rest[start:stop]
+        block += rest[start:stop]
         np.subtract(flat[:, start:stop], block, out=block)
         np.square(block, out=block)
         xyz = block.reshape(T, -1, 3)

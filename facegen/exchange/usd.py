@@ -11,15 +11,21 @@ Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate)
                    playbackMode onceFromStart (play once from startTime to the audio's end); startTime
                    is its schema fallback 0 (authoring a timecode forces usdc crate 0.9 and a warning)
 
+With `mode="blendshapes"` the frames are UsdSkel blend shapes instead of `points` samples: /Face is a
+SkelRoot, and a Skeleton, a SkelAnimation with one blendShapeWeights sample per frame and one BlendShape
+per PCA target are added (layout in usd_skel.py); customLayerData["facegen"]["reconstruction"] states the
+error of the reconstruction.
+
 Stage metadata: timeCodesPerSecond = framesPerSecond = fps, startTimeCode 0, endTimeCode T-1, upAxis Y,
 metersPerUnit (`meters_per_unit`, default 0.2: BIWI coordinates are scaled to unit surface area, and a
 face mask is about 0.04 m², so one unit is about 0.2 m and the face is about 19 cm tall), and
-customLayerData["facegen"] = {version, fps, frames, metadata (the animation's metadata, JSON-able values
+customLayerData["facegen"] = {version, mode, fps, frames, metadata (the animation's metadata, JSON-able values
 only; lists of one scalar type become typed arrays, other lists JSON strings)}.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
@@ -30,10 +36,12 @@ import numpy as np
 from facegen import __version__
 from facegen.animation import Animation
 from facegen.errors import FacegenError
+from facegen.exchange import usd_skel
 from facegen.exchange.wav import atomic_with_sidecar, read_wav
 from facegen.mesh import Mesh, check_topology
 
 EXTENSIONS = (".usda", ".usdc", ".usd")
+MODES = ("points", "blendshapes")
 DEFAULT_METERS_PER_UNIT = 0.2
 ROOT_PATH = "/Face"
 MESH_PATH = "/Face/Mesh"
@@ -44,12 +52,18 @@ def write(
     anim: Animation,
     path: str | os.PathLike,
     *,
+    mode: str = "points",
+    morph_targets: int | str | None = None,
+    tolerance: float | None = None,
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
     write_audio: bool = True,
     audio_source: str | os.PathLike | None = None,
 ) -> list[Path]:
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
+    `mode` is "points" (one `points` sample per frame) or "blendshapes" (UsdSkel blend shapes from the PCA
+    basis: `morph_targets` fixes their number K, an int, or "all" for one per frame; by default K is the
+    fewest keeping every vertex within `tolerance` x the face's size, default pca.DEFAULT_TOLERANCE).
     Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio`
     is true. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
     to `clip.usda`) it is referenced, not overwritten.
@@ -64,24 +78,52 @@ def write(
         raise FacegenError(f"{path} is not a USD file name: use .usda, .usdc or .usd")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
+    basis = _check_mode(anim, mode, morph_targets, tolerance)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
         layer = Sdf.Layer.CreateNew(str(tmp))
         if layer is None:
             raise FacegenError(f"cannot create USD layer {tmp}: check the output folder")
         stage = Usd.Stage.Open(layer)
-        _author_stage(stage, anim, meters_per_unit, f"./{wav.name}" if wav is not None else None)
-        del stage
-        _author_samples(layer, anim)
+        audio_asset = f"./{wav.name}" if wav is not None else None
+        if basis is None:
+            _author_stage(stage, anim, meters_per_unit, audio_asset)
+            del stage
+            _author_samples(layer, anim)
+        else:
+            names, offsets, weights = usd_skel.shapes(basis)
+            info = {"reconstruction": usd_skel.layer_info(basis, len(names))}
+            _author_stage(stage, anim, meters_per_unit, audio_asset, "blendshapes", info)
+            usd_skel.author_skeleton(stage, MESH_PATH, names, offsets)
+            del stage
+            usd_skel.author_weights(layer, weights)
         if not layer.Save():
             raise FacegenError(f"cannot write {path}: check free disk space and permissions")
         del layer
     return [path] if wav is None else [path, wav]
 
 
-def _author_stage(stage, anim: Animation, meters_per_unit: float, audio_asset: str | None) -> None:
-    """Everything except the per-frame samples: stage metadata, prims, topology, rest pose, audio."""
-    from pxr import Kind, Sdf, Usd, UsdGeom, UsdMedia, Vt
+def _check_mode(anim: Animation, mode: str, morph_targets: int | str | None, tolerance: float | None):
+    """Refuse an unknown mode or blendshape options in points mode; the PCA basis for blendshapes."""
+    if mode not in MODES:
+        raise FacegenError(f"unknown USD mode {mode!r}: use one of {', '.join(MODES)}")
+    if mode == "points":
+        given = [n for n, v in (("morph targets", morph_targets), ("tolerance", tolerance)) if v is not None]
+        if given:
+            raise FacegenError(
+                f"{' and '.join(given)} apply to USD blendshapes only: add --usd-mode blendshapes or drop them"
+            )
+        return None
+    return usd_skel.basis_for(anim, morph_targets, tolerance)
+
+
+def _author_stage(
+    stage, anim: Animation, meters_per_unit: float, audio_asset: str | None, mode: str = "points",
+    info: dict | None = None,
+) -> None:
+    """Everything except the per-frame samples: stage metadata, prims, topology, rest pose, audio;
+    `info` is added to customLayerData["facegen"]."""
+    from pxr import Kind, Sdf, Usd, UsdGeom, UsdMedia, UsdSkel, Vt
 
     frames = anim.num_frames
     stage.SetTimeCodesPerSecond(float(anim.fps))
@@ -91,7 +133,7 @@ def _author_stage(stage, anim: Animation, meters_per_unit: float, audio_asset: s
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
 
-    root = UsdGeom.Xform.Define(stage, ROOT_PATH)
+    root = (UsdSkel.Root if mode == "blendshapes" else UsdGeom.Xform).Define(stage, ROOT_PATH)
     Usd.ModelAPI(root.GetPrim()).SetKind(Kind.Tokens.component)
     stage.SetDefaultPrim(root.GetPrim())
 
@@ -117,9 +159,11 @@ def _author_stage(stage, anim: Animation, meters_per_unit: float, audio_asset: s
     stage.GetRootLayer().customLayerData = {
         "facegen": {
             "version": __version__,
+            "mode": mode,
             "fps": float(anim.fps),
             "frames": int(frames),
             "metadata": _usd_dict(anim.metadata),
+            **(info or {}),
         }
     }
 
@@ -198,7 +242,7 @@ def open_stage(path: str | os.PathLike):
 
     path = Path(path)
     if not path.is_file():
-        raise FacegenError(f"USD file {path} does not exist: pass an existing .usda/.usdc/.usd file")
+        raise FacegenError(f"USD file {path} does not exist: pass an existing .usda/.usdc/.usd/.usdz file")
     try:
         cached = Sdf.Layer.Find(str(path))
         if cached is not None:  # a layer still held in this process: read the file as it is now
@@ -265,6 +309,19 @@ def points_samples(mesh) -> tuple[list[float], list[np.ndarray]]:
     return times, [np.asarray(attr.Get(t), dtype=np.float32) for t in times]
 
 
+def frames_of(stage, mesh) -> tuple[list[float], list[np.ndarray] | np.ndarray]:
+    """The mesh's animation: its `points` samples, or, when it has none and is bound to blend shapes, the
+    points blended from its UsdSkel blend shapes at each blendShapeWeights sample ([T, V, 3] float32).
+    A broken skel binding is a FacegenError."""
+    times, frames = points_samples(mesh)
+    if times or not usd_skel.has_blendshapes(mesh):
+        return times, frames
+    rest = rest_points(mesh)
+    if rest is None:
+        raise FacegenError(f"mesh {mesh.GetPath()} has blend shapes but no points to apply them to")
+    return usd_skel.blendshape_frames(stage, mesh, rest)
+
+
 def rest_points(mesh) -> np.ndarray | None:
     """The default (non-animated) `points` value, which facegen writes as the rest pose."""
     from pxr import Usd
@@ -289,8 +346,28 @@ def audio_file(sound) -> tuple[str, str]:
     return asset.path, asset.resolvedPath
 
 
+def read_audio_asset(resolved: str) -> tuple[np.ndarray, int]:
+    """Read the audio a SpatialAudio prim resolves to: a file, or a file inside a .usdz package
+    (`clip.usdz[clip.wav]`, read through USD's asset resolver); unreadable audio is a FacegenError."""
+    from pxr import Ar
+
+    if not Ar.IsPackageRelativePath(resolved):
+        return read_wav(resolved)
+    asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+    if asset is None:
+        raise FacegenError(f"cannot open audio {resolved}: the package is incomplete, write it again")
+    import soundfile as sf
+
+    try:
+        data, rate = sf.read(io.BytesIO(bytes(asset.GetBuffer())), dtype="float32", always_2d=True)
+    except (OSError, RuntimeError) as exc:
+        raise FacegenError(f"cannot read audio {resolved} ({exc}): write the package again") from exc
+    return data.mean(axis=1).astype(np.float32), int(rate)
+
+
 def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:
-    """Read a USD face animation: the mesh's faces, one frame per `points` time sample, fps, audio.
+    """Read a USD face animation: the mesh's faces, one frame per `points` time sample (or per
+    blendShapeWeights sample, blended, for a blendshapes file), fps, audio.
 
     The fps is the stage's timeCodesPerSecond (`fps`, else 25, when it is not authored); asking for an
     fps the file contradicts is a FacegenError. With `template`, the file's topology must match it.
@@ -300,8 +377,8 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     if mesh is None:
         raise FacegenError(f"{path} has no UsdGeom.Mesh: pass a facegen USD animation")
     faces = mesh_faces(mesh)
-    _, frames = points_samples(mesh)
-    if not frames:
+    _, frames = frames_of(stage, mesh)
+    if len(frames) == 0:
         raise FacegenError(f"{path}: mesh {mesh.GetPath()} has no points time samples: nothing to read")
     if len({len(f) for f in frames}) != 1:
         raise FacegenError(f"{path}: the points samples have different vertex counts: the file is broken")
@@ -323,7 +400,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
         asset, resolved = audio_file(sound)
         if not resolved:
             raise FacegenError(f"{path} refers to audio {asset!r}, which is missing: put it beside the file")
-        audio, sample_rate = read_wav(resolved)
+        audio, sample_rate = read_audio_asset(resolved)
     info = stage.GetRootLayer().customLayerData.get("facegen", {})
     metadata = _python_value(info.get("metadata", {})) if isinstance(info, dict) else {}
     return Animation(

@@ -19,6 +19,7 @@ Regions (vertex index arrays) name what the rig moves: `lips`, `jaw`, `upper_fac
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import os
 from dataclasses import dataclass, fields, replace
@@ -41,6 +42,7 @@ MOUTH_Y, EYE_Y = -6.0, 1.0  # the mouth slit and the eye slits lie between two r
 BOTTOM_V, TOP_V = -12.6, 10.0  # arc-length extent of the rows
 PHI_MAX = 1.35  # half the angle the columns wrap around the head (rad)
 
+TEMPLATES = Path(__file__).resolve().parents[2] / "templates"  # the committed neutral face (source tree)
 # files written by write_templates (community names for the lips and upper-face regions)
 REGION_FILES = {"lve.txt": "lips", "fdd.txt": "upper_face"}
 
@@ -172,8 +174,7 @@ def _skin_depth(x: np.ndarray, v: float, p: FaceParams) -> np.ndarray:
     """Depth of the (unwarped) skin at |x| on the row at arc length v (for placing inner parts)."""
     phi = np.linspace(0.0, PHI_MAX, 2001)
     xs, zs = _cross_section(phi, np.full_like(phi, v))
-    _, zb = _profile(np.array([v]), p)
-    y = _profile(np.array([v]), p)[0]
+    y, zb = _profile(np.array([v]), p)
     ax = np.abs(np.asarray(x, float))
     return np.interp(ax, xs, zs) + zb[0] + _features(ax, np.full_like(ax, y[0]), p)
 
@@ -248,7 +249,7 @@ def _eye_shape(ax: np.ndarray, p: FaceParams) -> tuple[np.ndarray, np.ndarray, n
     """Across-eye coordinate s (-1 inner corner, +1 outer) and the rest openings of the lids (cm)."""
     L = LAYOUT
     s = (ax - L.eye_x) / L.eye_half_width
-    inside = np.clip(1 - s**2, 0, 1)
+    inside = np.clip(1 - (s / 0.93) ** 2, 0, 1)  # the corners close on the slit's last columns
     upper = p.eye_opening * L.upper_open * inside**0.6 * (1 - 0.2 * s)
     lower = p.eye_opening * L.lower_open * inside**0.7 * (1 + 0.15 * s)
     return s, upper, lower
@@ -331,7 +332,7 @@ def _grid_faces(slits: dict) -> np.ndarray:
     i_m = ROWS_BELOW_MOUTH - 1
     i_e = ROWS_BELOW_MOUTH + ROWS_BETWEEN_SLITS - 1
     for row, cols in ((i_m, slits["mouth"]), (i_e, slits["eyes"])):
-        cs = set(int(c) for c in cols)
+        cs = {int(c) for c in cols}
         for c in range(W - 1):
             if c in cs and c + 1 in cs:
                 keep[row, c] = False
@@ -404,8 +405,7 @@ def _eyeballs(p: FaceParams) -> tuple[np.ndarray, np.ndarray]:
     pts, tris = [], []
     for k, side in enumerate((+1, -1)):  # left (+x) then right
         pts.append(unit + np.array([side * L.eye_x, EYE_Y, zc]))
-        f = faces + k * len(unit)
-        tris.append(f if side > 0 else f)  # a translated cap keeps its outward winding
+        tris.append(faces + k * len(unit))  # a translated cap keeps its outward winding
     return np.concatenate(pts), np.concatenate(tris)
 
 
@@ -454,9 +454,19 @@ def _speaker_warp(pts: np.ndarray, p: FaceParams) -> np.ndarray:
     return np.stack([x, y, z], 1)
 
 
+@functools.lru_cache(maxsize=1)
+def _template_regions() -> dict[str, np.ndarray]:
+    """The named regions, from the neutral face's rest coordinates (the same for every speaker)."""
+    p = FaceParams()
+    _, _, slits, info = _skin(p)
+    _, _, cavity_st = _cavity(p)
+    n_eye = 1 + EYE_RINGS * EYE_SEGMENTS
+    return _regions(info, slits, GRID_ROWS * GRID_COLUMNS, n_eye, cavity_st, p)
+
+
 def _regions(info: dict, slits: dict, n_skin: int, n_eye: int, cavity_st: np.ndarray,
              p: FaceParams) -> dict[str, np.ndarray]:
-    """Named vertex sets, from the rest (material) coordinates."""
+    """Named vertex sets, from the rest coordinates of the skin (cm)."""
     L = LAYOUT
     W = GRID_COLUMNS
     x, y, v = info["x"], info["y"], info["v"]
@@ -486,7 +496,7 @@ def _regions(info: dict, slits: dict, n_skin: int, n_eye: int, cavity_st: np.nda
     out["upper_lids"] = idx[lid_up]
     out["lower_lids"] = idx[lid_lo]
     brow_y = 2.85 + 0.5 * (np.exp(-(((x - 3.0) / 2.4) ** 2)) + np.exp(-(((x + 3.0) / 2.4) ** 2)))
-    brows = (ax > 0.9) & (ax < 5.4) & (np.abs(y - brow_y) < 0.55)
+    brows = (ax < 5.4) & (np.abs(y - brow_y) < 0.55)  # both brows and the glabella between them
     out["brows"] = idx[brows]
     out["forehead"] = idx[(y > brow_y + 0.55) & (ax < 6.0)]
     out["upper_face"] = idx[(y > EYE_Y - 1.3) & (np.abs(info["phi"]) < 1.2)]
@@ -508,17 +518,17 @@ def _regions(info: dict, slits: dict, n_skin: int, n_eye: int, cavity_st: np.nda
 def make_face(params: FaceParams | None = None) -> Mesh:
     """The procedural neutral face (23,370 vertices, BIWI-normalised) with its named regions."""
     p = params or FaceParams()
-    skin, skin_faces, slits, info = _skin(p)
+    skin, skin_faces, _, _ = _skin(p)
     eyes, eye_faces = _eyeballs(p)
-    cav, cav_faces, cav_st = _cavity(p)
-    n_skin, n_eye = len(skin), len(eyes) // 2
+    cav, cav_faces, _ = _cavity(p)
+    n_skin = len(skin)
     pts = np.concatenate([skin, eyes, cav])
     faces = np.concatenate([skin_faces, eye_faces + n_skin, cav_faces + n_skin + len(eyes)])
     if len(pts) != NUM_VERTICES:
         raise AssertionError(f"face has {len(pts)} vertices, expected {NUM_VERTICES}")
     pts = _speaker_warp(pts, p)
     pts = normalise(pts, faces)
-    regions = _regions(info, slits, n_skin, n_eye, cav_st, p)
+    regions = {name: idx.copy() for name, idx in _template_regions().items()}
     return Mesh(pts.astype(np.float32), faces.astype(np.int32), regions)
 
 
@@ -578,14 +588,16 @@ def write_ply(vertices: np.ndarray, faces: np.ndarray, path: str | os.PathLike) 
 
 
 def write_templates(folder: str | os.PathLike) -> list[Path]:
-    """Write the neutral face: face.ply, lve.txt (lips), fdd.txt (upper face) and regions/<name>.txt."""
+    """Write the neutral face: face.ply, lve.txt (lips), fdd.txt (upper face) and regions/<name>.txt
+    for every other region (the rig's layout). Returns the paths written."""
     folder = Path(folder)
     (folder / "regions").mkdir(parents=True, exist_ok=True)
     mesh = make_face()
     written = [folder / "face.ply"]
     write_ply(mesh.vertices, mesh.faces, written[0])
     targets = [(folder / f, mesh.regions[r]) for f, r in REGION_FILES.items()]
-    targets += [(folder / "regions" / f"{name}.txt", idx) for name, idx in sorted(mesh.regions.items())]
+    targets += [(folder / "regions" / f"{name}.txt", idx) for name, idx in sorted(mesh.regions.items())
+                if name not in REGION_FILES.values()]
     for path, idx in targets:
         with atomic_path(path) as tmp:
             write_region(idx, tmp)
@@ -593,10 +605,12 @@ def write_templates(folder: str | os.PathLike) -> list[Path]:
     return written
 
 
-def load_template(folder: str | os.PathLike) -> Mesh:
-    """Read a face written by write_templates (mesh and all regions)."""
+def load_template(folder: str | os.PathLike = TEMPLATES) -> Mesh:
+    """Read a face written by write_templates (mesh and all its regions)."""
     folder = Path(folder)
     mesh = read_mesh(folder / "face.ply")
+    for name, region in REGION_FILES.items():
+        mesh.regions[region] = read_region(folder / name)
     for path in sorted((folder / "regions").glob("*.txt")):
         mesh.regions[path.stem] = read_region(path)
     return mesh

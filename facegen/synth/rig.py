@@ -56,15 +56,16 @@ def _falloff(d: np.ndarray, radius: float) -> np.ndarray:
     return t * t * (3.0 - 2.0 * t)
 
 
-def _rotate_x(p: np.ndarray, centre: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rotate points p [..., 3] about the x-parallel axis through `centre` by `angle` [...] (rad);
-    positive angles move points in front of the centre (+z) downwards (-y)."""
+def _rotate_x(pos: np.ndarray, idx: np.ndarray, centre: np.ndarray, angle: np.ndarray) -> None:
+    """Rotate the vertices `idx` of pos [T, V, 3] in place about x-parallel axes through `centre`
+    ([3] or [len(idx), 3]) by `angle` [T, len(idx)] rad; positive angles move points in front of the
+    centre (+z) downwards (-y)."""
     c, s = np.cos(angle), np.sin(angle)
-    y, z = p[..., 1] - centre[..., 1], p[..., 2] - centre[..., 2]
-    out = p.copy()
-    out[..., 1] = centre[..., 1] + y * c - z * s
-    out[..., 2] = centre[..., 2] + y * s + z * c
-    return out
+    centre = np.broadcast_to(centre, (len(idx), 3))
+    y = pos[:, idx, 1] - centre[None, :, 1]
+    z = pos[:, idx, 2] - centre[None, :, 2]
+    pos[:, idx, 1] = centre[None, :, 1] + y * c - z * s
+    pos[:, idx, 2] = centre[None, :, 2] + y * s + z * c
 
 
 def _fit_centre(points: np.ndarray) -> np.ndarray:
@@ -117,16 +118,19 @@ class Rig:
             return np.stack([np.broadcast_to(dx, (V,)), np.broadcast_to(dy, (V,)),
                              np.broadcast_to(dz, (V,))], 1) * cm
 
-        near = _falloff(d_m, 0.9)  # the lips themselves
-        peri = _falloff(d_m, 2.4)  # lips and the skin around them
-        w_up = _falloff(d_up, 1.5) * upper_side
-        w_lo = _falloff(d_lo, 1.5) * ~upper_side
+        sm = self._smooth
+        near = sm(_falloff(d_m, 0.9))  # the lips themselves
+        peri = sm(_falloff(d_m, 2.4))  # lips and the skin around them
+        w_up = sm(_falloff(d_up, 1.5) * upper_side)
+        w_lo = sm(_falloff(d_lo, 1.5) * ~upper_side)
         sgn = np.where(upper_side, 1.0, -1.0)
         opening = np.clip(1 - (X / half) ** 2, 0, 1)
-        off["lip_close"] = field(dz=-0.12 * _falloff(d_m, 0.6))  # pressed (the seal itself is below)
+        off["lip_close"] = field(dz=-0.12 * sm(_falloff(d_m, 0.6)))  # pressed (the seal itself is below)
         Xc = np.clip(X, -half, half)
-        off["lip_round"] = field(dx=-0.42 * Xc * peri, dy=sgn * 0.22 * near * opening ** 0.7,
-                                 dz=0.75 * peri**2)
+        peri_round = sm(_falloff(d_m, 1.9))
+        wide_round = sm(_falloff(d_m, 3.0))
+        off["lip_round"] = field(dx=-0.36 * Xc * wide_round, dy=sgn * 0.22 * near * opening**0.7,
+                                 dz=0.5 * peri_round**2 + 0.25 * near)
         off["lip_wide"] = field(dx=0.24 * Xc * peri, dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near,
                                 dz=-0.18 * peri)
         off["lip_funnel"] = field(dx=-0.18 * Xc * peri, dy=sgn * 0.3 * near * opening**0.3,
@@ -136,29 +140,29 @@ class Rig:
 
         # upper face
         d_brow = dist(reg["brows"])
-        w_brow = _falloff(d_brow, 1.3)
+        w_brow = sm(_falloff(d_brow, 1.3))
         Y = (t[:, 1] - t[reg["brows"], 1].mean()) / cm  # cm above the brows
-        above = _falloff(d_brow, 5.0) * np.clip(Y / 1.2, 0, 1) ** 2 * (3 - 2 * np.clip(Y / 1.2, 0, 1))
+        above = sm(_falloff(d_brow, 5.0)) * np.clip(Y / 1.2, 0, 1) ** 2 * (3 - 2 * np.clip(Y / 1.2, 0, 1))
         ramp = np.clip((Y - 0.6) / 0.8, 0, 1)
         wrinkle = 0.05 * np.sin(2 * np.pi * (Y - 0.6) / 1.1) * _falloff(d_brow, 4.5) * ramp * ramp * (3 - 2 * ramp)
         off["brow_raise"] = field(dy=0.6 * np.maximum(w_brow, 0.75 * above), dz=wrinkle)
         Xe = t[:, 0] / cm
         inner = np.clip(1.3 - np.abs(Xe) / 4.0, 0.3, 1.0)
-        off["brow_frown"] = field(dx=-0.35 * np.sign(Xe) * inner * w_brow, dy=-0.32 * w_brow * inner,
+        off["brow_frown"] = field(dx=-0.35 * np.tanh(Xe / 0.8) * inner * w_brow, dy=-0.45 * w_brow * inner,
                                   dz=0.1 * w_brow)
         d_corner = dist(np.array([mu[0], mu[-1], ml[0], ml[-1]]))
-        w_corner = _falloff(d_corner, 2.6)
+        w_corner = sm(_falloff(d_corner, 2.6))
         cheeks = reg["cheeks"]
         centres = [cheeks[np.argmin(np.linalg.norm(t[cheeks] - t[cheeks[side]].mean(0), axis=1))]
                    for side in (t[cheeks, 0] > 0, t[cheeks, 0] < 0)]
-        w_cheek = _falloff(dist(np.array(centres)), 3.2)
+        w_cheek = sm(_falloff(dist(np.array(centres)), 3.2))
         lids_lo = np.concatenate([reg["left_lower_lid_margin"], reg["right_lower_lid_margin"]])
         lids_up = np.concatenate([reg["left_upper_lid_margin"], reg["right_upper_lid_margin"]])
         d_lid_up, src_lid_up = dist(lids_up, True)
         d_lid_lo, src_lid_lo = dist(lids_lo, True)
         lower_lid = d_lid_lo < d_lid_up
-        w_squint = _falloff(d_lid_lo, 0.9) * lower_lid
-        off["cheek_raise"] = field(dx=0.4 * np.sign(X) * w_corner, dy=0.45 * w_corner + 0.3 * w_cheek
+        w_squint = sm(_falloff(d_lid_lo, 0.9) * lower_lid)
+        off["cheek_raise"] = field(dx=0.4 * np.tanh(X / 1.0) * w_corner, dy=0.45 * w_corner + 0.3 * w_cheek
                                    + 0.12 * w_squint, dz=-0.12 * w_corner + 0.25 * w_cheek)
         self._linear = [c for c in CHANNELS if c in off]
         self._offsets = np.stack([off[c] for c in self._linear]).reshape(len(self._linear), -1).astype(np.float32)
@@ -174,8 +178,8 @@ class Rig:
         ramp = 1.8
         w_jaw = np.where(in_jaw, 0.5 + 0.5 * (1 - _falloff(dist(np.nonzero(free)[0]), ramp)),
                          0.5 * _falloff(dist(reg["jaw"]), ramp))
-        w_jaw[(d_up < 0.6) & upper_side & (opening > 0)] = 0.0
-        self._jaw_idx = np.nonzero(w_jaw > 0)[0]
+        w_jaw = sm(w_jaw, pin=np.concatenate([mu, ml]))
+        self._jaw_idx = np.nonzero(w_jaw > 1e-4)[0]
         self._jaw_w = w_jaw[self._jaw_idx]
 
         # lids: per-column closing angles about each eyeball centre
@@ -194,10 +198,11 @@ class Rig:
             a = angle(t[up], c) - angle(t[lo], c)
             close_angle[up] = a
             close_angle[lo] = a
-        w_lid_up = _falloff(d_lid_up, 1.0) * ~lower_lid
-        w_lid_lo = _falloff(d_lid_lo, 0.6) * lower_lid
+        lid_margins = np.concatenate([lids_up, lids_lo])
+        w_lid_up = sm(_falloff(d_lid_up, 1.0) * ~lower_lid, pin=lid_margins)
+        w_lid_lo = sm(_falloff(d_lid_lo, 0.6) * lower_lid, pin=lid_margins)
         src = np.where(lower_lid, src_lid_lo, src_lid_up)
-        lid_idx = np.nonzero((w_lid_up > 0) | (w_lid_lo > 0))[0]
+        lid_idx = np.nonzero(((w_lid_up > 1e-4) & ~lower_lid) | ((w_lid_lo > 1e-4) & lower_lid))[0]
         self._lid_idx = lid_idx
         self._lid_upper = ~lower_lid[lid_idx]
         self._lid_w = np.where(self._lid_upper, w_lid_up[lid_idx], w_lid_lo[lid_idx])
@@ -205,8 +210,8 @@ class Rig:
         self._lid_centre = self.eye_centres[side_of[src[lid_idx]]]
 
         # lip seal: every lip vertex follows its nearest margin vertex towards the meeting line
-        seal_w = _falloff(d_m, 1.1)
-        seal_idx = np.nonzero(seal_w > 0)[0]
+        seal_w = sm(_falloff(d_m, 1.1), pin=np.concatenate([mu, ml]))
+        seal_idx = np.nonzero(seal_w > 1e-4)[0]
         self._seal_idx = seal_idx
         self._seal_w = seal_w[seal_idx]
         col_of = np.full(V, -1)
@@ -218,12 +223,32 @@ class Rig:
         self._mu, self._ml = mu, ml
 
     def _graph(self):
+        """The mesh's edges plus its 2-ring (Euclidean lengths): graph distances close to geodesic ones
+        without the diamond-shaped bias of a grid's edges. Also sets the neighbour-average operator."""
         f = self.faces
+        n = len(self.template)
         e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
         e = np.unique(np.sort(e, 1), axis=0)
-        w = np.linalg.norm(self.template[e[:, 0]] - self.template[e[:, 1]], axis=1) + 1e-12
-        n = len(self.template)
-        return coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+        adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+        adj = ((adj + adj.T) > 0).astype(np.float64)
+        degree = np.asarray(adj.sum(1)).ravel()
+        self._average = (adj.multiply(1 / np.maximum(degree, 1)[:, None])).tocsr()
+        ring2 = (adj @ adj + adj).tocoo()
+        keep = ring2.row < ring2.col
+        i, j = ring2.row[keep], ring2.col[keep]
+        w = np.linalg.norm(self.template[i] - self.template[j], axis=1) + 1e-12
+        return coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+
+    def _smooth(self, w: np.ndarray, iterations: int = 12, pin: np.ndarray | None = None) -> np.ndarray:
+        """Average each value with its neighbours' (`iterations` times): removes creases of the
+        distance falloffs; `pin` vertices keep their values."""
+        out = np.asarray(w, np.float64).copy()
+        fixed = None if pin is None else out[pin].copy()
+        for _ in range(iterations):
+            out = 0.5 * out + 0.5 * (self._average @ out)
+            if pin is not None:
+                out[pin] = fixed
+        return out
 
     def pose(self, weights: np.ndarray) -> np.ndarray:
         """Vertex positions [T, V, 3] (float32) for channel weights [T, C] in `channels` order."""
@@ -235,9 +260,8 @@ class Rig:
         ch = {c: w[:, i] for i, c in enumerate(CHANNELS)}
         pos = self.template.astype(np.float32)[None] + (w[:, self._linear_index] @ self._offsets).reshape(T, V, 3)
         # jaw
-        ang = ch["jaw_open"][:, None] * JAW_MAX_ANGLE * self._jaw_w[None, :]
-        j = self._jaw_idx
-        pos[:, j] = _rotate_x(pos[:, j], self.hinge[None, None, :].astype(np.float32), ang)
+        ang = ch["jaw_open"][:, None] * np.float32(JAW_MAX_ANGLE) * self._jaw_w[None, :].astype(np.float32)
+        _rotate_x(pos, self._jaw_idx, self.hinge.astype(np.float32), ang)
         # lids: blink closes, widen opens (less while blinking), frown narrows a little
         blink = ch["blink"][:, None]
         widen = ch["lid_widen"][:, None] * (1 - blink)
@@ -246,8 +270,7 @@ class Rig:
         theta = np.where(up, blink * 0.85 * self._lid_alpha - widen * 0.2 + frown * 0.05,
                          -blink * 0.15 * self._lid_alpha + widen * 0.07)
         theta = theta * self._lid_w[None, :]
-        li = self._lid_idx
-        pos[:, li] = _rotate_x(pos[:, li], self._lid_centre[None].astype(np.float32), theta.astype(np.float32))
+        _rotate_x(pos, self._lid_idx, self._lid_centre.astype(np.float32), theta.astype(np.float32))
         # lip seal
         close = ch["lip_close"]
         if np.any(close > 0):
@@ -291,18 +314,18 @@ def _v(**kw: float) -> np.ndarray:
 
 # targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
-    "rest": (_v(), 1.0, 1.0),
-    "PBM": (_v(jaw_open=0.04, lip_close=1.0), 3.0, 8.0),
-    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 2.0, 6.0),
+    "rest": (_v(), 1.5, 1.5),
+    "PBM": (_v(jaw_open=0.04, lip_close=1.0), 1.5, 2.5),
+    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 1.5, 3.0),
     "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.5, 0.8),
     "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 2.0, 1.2),
-    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 1.5, 4.0),
+    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 1.2, 2.5),
     "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 1.0, 0.3),
     "L": (_v(jaw_open=0.2), 1.0, 0.3),
     "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 1.0, 2.0),
     "KG": (_v(jaw_open=0.2), 0.8, 0.3),
     "H": (_v(jaw_open=0.25), 0.3, 0.2),
-    "W": (_v(jaw_open=0.05, lip_round=1.0), 1.5, 5.0),
+    "W": (_v(jaw_open=0.05, lip_round=1.0), 1.2, 3.0),
     "Y": (_v(jaw_open=0.1, lip_wide=0.5), 1.0, 1.5),
     "AA": (_v(jaw_open=0.65, lip_wide=0.1), 2.5, 1.0),
     "AE": (_v(jaw_open=0.55, lip_wide=0.3), 2.5, 1.0),
@@ -316,6 +339,9 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "UH": (_v(jaw_open=0.2, lip_round=0.6), 2.0, 2.5),
     "UW": (_v(jaw_open=0.1, lip_round=1.0), 2.0, 3.5),
 }
+
+VOWELS = frozenset({"AA", "AE", "AH", "ER", "EH", "IY", "IH", "AO", "OW", "UH", "UW"})
+VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
 
 # espeak-ng phoneme mnemonics (English voices) -> viseme sequence (diphthongs: two or three parts)
 PHONEME_VISEMES: dict[str, tuple[str, ...]] = {
@@ -393,6 +419,8 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     and the jaw nearly shut; a bilabial shorter than a frame still closes the lips on its nearest frame.
     """
     style = style or SpeakerStyle()
+    if num_frames <= 0:
+        return np.zeros((0, len(LOWER_CHANNELS)), np.float32)
     duration = num_frames / fps
     n = int(np.ceil(duration * _RATE)) + 1
     t = np.arange(n) / _RATE
@@ -417,6 +445,7 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
 
     C = len(LOWER_CHANNELS)
     lips = np.array([c != "jaw_open" for c in LOWER_CHANNELS])
+    is_close = np.array([c == "lip_close" for c in LOWER_CHANNELS])
     num = np.zeros((n, C))
     den = np.full((n, C), 1e-9)
     ahead, behind = 0.07 * style.coarticulation, 0.045 * style.coarticulation
@@ -424,9 +453,12 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
         target, dom_jaw, dom_lips = VISEMES[vis]
         centre, half = (start + end) / 2, (end - start) / 2
         dt = t - centre
-        away = np.maximum(np.abs(dt) - half * 0.6, 0.0)
+        away = np.maximum(np.abs(dt) - half * (1.0 if vis == "rest" else 0.8), 0.0)
         rate = np.where(dt < 0, 1 / ahead, 1 / behind)  # before the segment: anticipation
-        d = np.exp(-away * rate)[:, None] * np.where(lips, dom_lips, dom_jaw)[None, :]
+        dom = np.where(lips, dom_lips, dom_jaw)
+        if vis in VOWELS:
+            dom = np.where(is_close, VOWEL_APERTURE_DOMINANCE, dom)
+        d = np.exp(-away * rate)[:, None] * dom[None, :]
         num += d * target[None, :]
         den += d
     curves = num / den
@@ -434,8 +466,12 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     # bilabial closure: lips closed over the phone, jaw nearly shut
     idx = {c: i for i, c in enumerate(LOWER_CHANNELS)}
     for start, end in bilabial:
-        env = np.clip(np.minimum(t - start + 0.03, end + 0.03 - t) / 0.03, 0, 1)
+        def envelope(ramp: float, start: float = start, end: float = end) -> np.ndarray:
+            return np.clip(np.minimum(t - start + ramp, end + ramp - t) / ramp, 0, 1)
+
+        env = envelope(0.03)
         curves[:, idx["lip_close"]] = np.maximum(curves[:, idx["lip_close"]], env)
+        env = envelope(0.06)  # the jaw closes more slowly
         jaw = curves[:, idx["jaw_open"]]
         curves[:, idx["jaw_open"]] = jaw * (1 - env) + np.minimum(jaw, 0.06) * env
         for c in ("lip_wide", "lip_funnel", "lower_lip_tuck"):

@@ -160,6 +160,8 @@ def synthesize(text: str, voice: str = "en-us", pitch: int = 50, rate: int = 170
     native 22050 Hz unless `sample_rate` asks for another rate (times are unaffected).
     Words are the whitespace-separated words of `text` (edge punctuation stripped); a word spoken as
     several (e.g. "42" → "forty two") spans all of them; words that are not spoken are left out.
+    libespeak-ng keeps some waveform state (pitch flutter) between calls and places phone boundaries
+    on pitch periods, so repeating a call can move the times by up to a pitch period (~10 ms).
     """
     if not text.strip():
         raise FacegenError("nothing to synthesise: the text is empty")
@@ -249,7 +251,7 @@ def _timings(text: str, events: list[tuple[int, int, int, str]], rate: int, dura
         else:
             index[tok] = len(words)
             words.append(Word(tokens[tok][2], start, end))
-        phone_list += [Phone(name, s, e, index[tok]) for name, s, e in phones]
+        phone_list += [Phone(name, s, max(s, min(e, end)), index[tok]) for name, s, e in phones]
     return words, phone_list
 
 

@@ -1,0 +1,95 @@
+"""Benchmark: one training epoch over a BIWI-sized split, on the CPU, with facegen's own training loop.
+
+The split is the paper's: 192 sequences of ~4.7 s (here 90-145 frames at 25 fps, mean ~117), 23,370
+vertices, the full paper-sized network (tensor fusion of audio and 384-d text features), Adam, one
+sequence per step. Features are precomputed (random mel and text features, as the feature cache would
+give them); targets are read every step from memory-mapped float32 .npy files on disk, as in training
+(16 distinct files of ~40 MB, shared by the 192 sequences). The code timed is facegen.train's
+train_epoch with the same settings as `facegen train` (deterministic algorithms, flushed denormals,
+fused Adam).
+
+    python benchmarks/bench_train.py                 # 1 warm-up step, then 1 timed epoch on 2 threads
+    python benchmarks/bench_train.py --epochs 2 --threads 1 --modalities audio
+
+Prints seconds per epoch and sequences per second (target: <= 60 s per epoch on 2 CPU cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from facegen.data import Item, Sequence
+from facegen.model import FaceModel, ModelConfig
+from facegen.train import _Batch, _torch_settings, epoch_order, train_epoch
+
+BIWI_VERTICES = 23370
+
+
+def make_items(folder: Path, sequences: int, vertices: int, text_dim: int, files: int, seed: int) -> list[Item]:
+    rng = np.random.default_rng(seed)
+    lengths = rng.integers(90, 146, size=sequences)
+    template = rng.normal(0, 0.05, size=(vertices, 3)).astype(np.float32)
+    paths = []
+    for i in range(files):
+        path = folder / f"seq{i:02d}.npy"
+        motion = template.reshape(1, -1) + rng.normal(0, 0.002, size=(145, vertices * 3)).astype(np.float32)
+        np.save(path, motion)
+        paths.append(path)
+    items = []
+    for i, t in enumerate(lengths):
+        seq = Sequence(f"S{i % 6}_e{i:03d}", f"S{i % 6}", folder / "none.wav", paths[i % files])
+        mel = rng.normal(-40, 15, size=(t, 128)).astype(np.float32)
+        text = rng.normal(0, 1, size=(t, text_dim)).astype(np.float32)
+        items.append(Item(seq, mel, text, int(t), template))
+    return items
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sequences", type=int, default=192)
+    ap.add_argument("--vertices", type=int, default=BIWI_VERTICES)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--epochs", type=int, default=1)
+    ap.add_argument("--modalities", default="both", choices=("both", "audio", "text"))
+    ap.add_argument("--fusion", default="tensor", choices=("tensor", "concat"))
+    ap.add_argument("--text-dim", type=int, default=384)
+    ap.add_argument("--files", type=int, default=16, help="distinct target .npy files on disk")
+    args = ap.parse_args()
+
+    with tempfile.TemporaryDirectory(prefix="facegen-bench-") as tmp:
+        t0 = time.perf_counter()
+        items = make_items(Path(tmp), args.sequences, args.vertices, args.text_dim, args.files, seed=0)
+        frames = sum(it.num_frames for it in items)
+        print(f"data: {len(items)} sequences, {frames} frames (mean {frames / len(items) / 25:.2f} s), "
+              f"{args.vertices} vertices; made in {time.perf_counter() - t0:.1f} s")
+        with _torch_settings(args.threads):
+            torch.manual_seed(0)
+            cfg = ModelConfig(num_vertices=args.vertices, num_speakers=6, text_dim=args.text_dim,
+                              modalities=args.modalities, fusion=args.fusion)
+            model = FaceModel(cfg)
+            print(f"model: {args.modalities} ({args.fusion}), {sum(p.numel() for p in model.parameters()):,} "
+                  f"parameters; torch {torch.__version__}, {torch.get_num_threads()} threads")
+            optimizer = torch.optim.Adam(model.parameters(), lr=1e-4, fused=True)
+            device = torch.device("cpu")
+            batches = [_Batch(it, i % 6, 6, device) for i, it in enumerate(items)]
+            train_epoch(model, optimizer, batches, [0, 1])  # warm-up: allocations, oneDNN kernels
+            times = []
+            for epoch in range(args.epochs):
+                t0 = time.perf_counter()
+                loss = train_epoch(model, optimizer, batches, epoch_order(0, epoch, len(batches)))
+                times.append(time.perf_counter() - t0)
+                print(f"epoch {epoch + 1}: {times[-1]:.1f} s, {len(batches) / times[-1]:.2f} sequences/s, "
+                      f"{frames / times[-1]:.0f} frames/s, loss {loss:.3e}")
+        best = min(times)
+        print(f"seconds/epoch {best:.1f}  sequences/s {len(batches) / best:.2f}  "
+              f"({'within' if best <= 60 else 'OVER'} the 60 s target)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,81 @@
+"""USDZ: the USD stage (binary crate) and its audio packaged in one file.
+
+`out.usdz` is an uncompressed zip, as the USDZ spec wants, holding
+
+    out.usdc   the stage exactly as usd.py writes it (points or blendshapes mode), the package's root layer
+    out.wav    the clip's audio (16-bit PCM); the stage's SpatialAudio filePath is @./out.wav@, which
+               resolves inside the package (`/abs/out.usdz[out.wav]`)
+
+No sidecar is written beside the package: it is self-contained. The package is made with
+UsdUtils.CreateNewUsdzPackage from a temporary folder and renamed into place, so a failed write leaves
+nothing behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from facegen.animation import Animation
+from facegen.atomic import atomic_path, check_writable
+from facegen.errors import FacegenError
+from facegen.exchange import usd
+from facegen.mesh import Mesh
+
+EXTENSIONS = (".usdz",)
+
+
+def write(
+    anim: Animation,
+    path: str | os.PathLike,
+    *,
+    mode: str = "points",
+    morph_targets: int | str | None = None,
+    tolerance: float | None = None,
+    meters_per_unit: float = usd.DEFAULT_METERS_PER_UNIT,
+    write_audio: bool = True,
+    audio_source: str | os.PathLike | None = None,
+) -> list[Path]:
+    """Write `anim` as a .usdz package: the .usdc stage (options as usd.write) with its WAV inside.
+
+    Returns [path]: the package is the only file. `audio_source` is accepted for the common writer
+    signature; nothing is written beside the package, so the input audio is never touched.
+    """
+    from pxr import Sdf, UsdUtils
+
+    del audio_source  # the audio goes inside the package; no file beside it can be overwritten
+    path = Path(path)
+    if path.suffix.lower() not in EXTENSIONS:
+        raise FacegenError(f"{path} is not a USDZ file name: use .usdz")
+    check_writable(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    with atomic_path(path) as tmp, tempfile.TemporaryDirectory(prefix=f".{path.stem}.", dir=folder) as work:
+        stage_file = Path(work) / f"{path.stem}.usdc"
+        usd.write(
+            anim, stage_file, mode=mode, morph_targets=morph_targets, tolerance=tolerance,
+            meters_per_unit=meters_per_unit, write_audio=write_audio,
+        )
+        layer = Sdf.Layer.Find(str(stage_file))
+        if layer is not None:  # pxr may keep the layer just written: package the file as it is on disk
+            layer.Reload(force=True)
+        made = UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(stage_file)), str(tmp))
+        if not made or not tmp.is_file():
+            raise FacegenError(f"cannot write the USDZ package {path}: check free disk space and permissions")
+    return [path]
+
+
+def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:
+    """Read a .usdz package written by facegen (or any USDZ holding one animated face mesh)."""
+    return usd.read(path, template=template, fps=fps)
+
+
+def contents(path: str | os.PathLike) -> list[str]:
+    """The file names inside a .usdz package, in package order (the root layer first); an unreadable
+    package is a FacegenError."""
+    from pxr import Sdf
+
+    package = Sdf.ZipFile.Open(str(path))
+    if package is None:
+        raise FacegenError(f"{path} is not a readable zip package: write it again")
+    return list(package.GetFileNames())
