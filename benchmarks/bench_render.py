@@ -61,23 +61,33 @@ def main(argv: list[str] | None = None) -> int:
     from facegen.render import default_threads, render_animation
 
     anim = talking_clip()
-    print(f"bench_render: setup (imports, template) {time.perf_counter() - start:.2f} s; "
-          f"{anim.num_frames} frames, {anim.num_vertices} vertices, {len(anim.faces)} triangles, "
-          f"{args.threads or default_threads()} render threads")
+    print(
+        f"bench_render: setup (imports, template) {time.perf_counter() - start:.2f} s; "
+        f"{anim.num_frames} frames, {anim.num_vertices} vertices, {len(anim.faces)} triangles, "
+        f"{args.threads or default_threads()} render threads"
+    )
     rest = Animation(np.repeat(anim.template[None], FRAMES, 0), anim.faces, FPS, anim.template)
     cases = [("preview", None)] + ([("compare", rest)] if args.compare else [])
     with tempfile.TemporaryDirectory() as tmp:
         for name, other in cases:
             for run in range(args.runs):
                 cpu, wall = cpu_seconds(), time.perf_counter()
-                result = render_animation(anim, Path(tmp) / f"{name}.mp4", size=args.size, compare=other,
-                                          progress=False, threads=args.threads)
+                result = render_animation(
+                    anim,
+                    Path(tmp) / f"{name}.mp4",
+                    size=args.size,
+                    compare=other,
+                    progress=False,
+                    threads=args.threads,
+                )
                 wall, cpu = time.perf_counter() - wall, cpu_seconds() - cpu
                 mb = result.path.stat().st_size / 1e6
-                print(f"bench_render: {name} run {run + 1}: {result.width}x{result.height}, "
-                      f"{result.frames} frames ({result.duration:.1f} s clip) in {wall:.2f} s wall, "
-                      f"{cpu:.2f} s CPU ({1000 * wall / result.frames:.0f} ms/frame), {mb:.1f} MB"
-                      + ("  [target <= 10 s]" if name == "preview" else ""))
+                print(
+                    f"bench_render: {name} run {run + 1}: {result.width}x{result.height}, "
+                    f"{result.frames} frames ({result.duration:.1f} s clip) in {wall:.2f} s wall, "
+                    f"{cpu:.2f} s CPU ({1000 * wall / result.frames:.0f} ms/frame), {mb:.1f} MB"
+                    + ("  [target <= 10 s]" if name == "preview" else "")
+                )
     return 0
 
 

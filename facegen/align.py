@@ -8,6 +8,7 @@ original words. Words missing from pocketsphinx's dictionary get a pronunciation
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -247,6 +248,7 @@ def pronounce(token: str) -> list[str]:
 
 _LOCK = threading.RLock()
 _DECODERS: dict[str, object] = {}
+_PRONOUNCED: dict[int, set[str]] = {}  # id(decoder) → words whose espeak pronunciation is in its dictionary
 # Alignment tries these in turn until every word is placed. bestpath=False: the lattice pass after the
 # FSG search drops valid alignments. Wide beams rescue noisy speech (the search is constrained by the
 # transcript, so they stay affordable); fillers (noise/breath models) sometimes derail it.
@@ -285,14 +287,25 @@ def _decoder(kind: str):
 
 
 def _dictionary_word(decoder, token: str) -> str:
-    """The decoder's dictionary entry for `token`, adding one from espeak's G2P if it is missing."""
+    """The decoder's dictionary entry for `token`.
+
+    A word missing from the dictionary gets espeak's pronunciation; a known word gets it as an
+    alternative when it differs, so a quirk of either (CMUdict's "hmm" = HH M) does not derail it.
+    New words go in without rebuilding the searches: set_align_text builds a fresh one.
+    """
     key = unicodedata.normalize("NFKD", token).encode("ascii", "ignore").decode()
-    key = re.sub(r"[^a-z0-9']", "", key.lower()).strip("'")
-    if key and decoder.lookup_word(key) is not None:
+    key = re.sub(r"[^a-z0-9']", "", key.lower()).strip("'") or "oov_" + "_".join(f"{ord(c):x}" for c in token)
+    done = _PRONOUNCED.setdefault(id(decoder), set())
+    if key in done:
         return key
-    key = key or "oov_" + "_".join(f"{ord(c):x}" for c in token)
-    phones = pronounce(token) or ["AH"]
-    decoder.add_word(key, " ".join(phones), True)
+    known, n = [], 1
+    while (pron := decoder.lookup_word(key if n == 1 else f"{key}({n})")) is not None:
+        known.append(pron)
+        n += 1
+    phones = " ".join(pronounce(token) or ["AH"])
+    if phones not in known:
+        decoder.add_word(key if n == 1 else f"{key}({n})", phones, False)
+    done.add(key)
     return key
 
 
@@ -607,7 +620,7 @@ def _read_textgrid(text: str) -> list[Word]:
     intervals = [t for t in tiers if t[0] == "IntervalTier"]
     if not intervals:
         raise ValueError("no interval tier")
-    named = [t for t in intervals if t[1].strip().lower().endswith("words")]
+    named = [t for t in intervals if re.search(r"\bwords?$", t[1].strip().lower())]  # MFA: "spk - words"
     _, _, flat = (named or intervals)[0]
     words = []
     for k in range(0, len(flat), 3):
@@ -622,11 +635,9 @@ def _read_textgrid(text: str) -> list[Word]:
 
 def _read_csv(text: str) -> list[Word]:
     """CSV/TSV with a header naming word (or text/label), start and end; or 3 columns without one."""
-    try:
-        dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t")
-    except csv.Error:
-        dialect = csv.excel
-    rows = [r for r in csv.reader(text.splitlines(), dialect) if any(c.strip() for c in r)]
+    first = text.split("\n", 1)[0]
+    delimiter = next((d for d in "\t,;" if d in first), ",")
+    rows = [r for r in csv.reader(io.StringIO(text), delimiter=delimiter) if any(c.strip() for c in r)]
     if not rows:
         raise ValueError("the file is empty")
     header = [c.strip().lower() for c in rows[0]]
@@ -700,17 +711,16 @@ def write_alignment(words: list[Word], path: str | os.PathLike, duration: float 
     elif suffix == ".textgrid":
         content = _textgrid(words, duration)
     elif suffix == ".csv":
-        lines = ["word,start,end"] + [f"{_csv_cell(w.text)},{w.start:.6f},{w.end:.6f}" for w in words]
-        content = "\n".join(lines) + "\n"
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(["word", "start", "end"])
+        writer.writerows([w.text, f"{w.start:.6f}", f"{w.end:.6f}"] for w in words)
+        content = buffer.getvalue()
     else:
         raise FacegenError(f"cannot write alignment {path}: use a .json, .TextGrid or .csv file name")
     with atomic_path(path) as tmp:
         tmp.write_text(content, encoding="utf-8")
     return path
-
-
-def _csv_cell(text: str) -> str:
-    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
 
 
 def _textgrid(words: list[Word], duration: float | None) -> str:

@@ -59,8 +59,10 @@ def cli(debug: bool) -> None:
 @click.option("--text-model", help="Local folder (or cached id) of the text model, if not where the bundle says.")
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
               help="Output file: .usda .usdc .usd .npy (and more, see README).")
+@click.option("--preview", type=click.Path(dir_okay=False), help="Also render a preview video (.mp4) with sound.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
-def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, quiet):
+def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, preview,
+            quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.animate import animate as run
     from facegen.atomic import check_writable
@@ -69,11 +71,53 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
     check_writable(output)
+    if preview:
+        from facegen.render import check_output
+
+        check_output(preview)
     progress = _progress(quiet)
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
                bundle=model, template=template, text_model=text_model, progress=progress)
     written = write_animation(anim, output, audio_source=audio)
     progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
+    if preview:
+        from facegen.render import render_animation
+
+        result = render_animation(anim, preview, progress=not quiet)
+        for note in result.notes:
+            progress(note)
+        progress(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")
+
+
+@cli.command()
+@click.argument("input_file", metavar="IN", type=click.Path(dir_okay=False))
+@click.option("--output", "-o", required=True, type=click.Path(dir_okay=False), help="The video (.mp4).")
+@click.option("--compare", type=click.Path(dir_okay=False),
+              help="Another animation (ground truth or another model) shown beside IN with an error heat map.")
+@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Bundle whose template a .npy IN uses.")
+@click.option("--template", type=click.Path(dir_okay=False), help="Template mesh (PLY/OBJ) for a .npy IN.")
+@click.option("--fps", type=float, help="Frame rate of a .npy IN (default 25).")
+@click.option("--size", default=512, show_default=True, help="Pixels per view (square).")
+@click.option("--views", default="front,three_quarter", show_default=True,
+              help="Comma-separated views: front, three_quarter, profile.")
+@click.option("--error-scale", type=float, help="Fix the heat map's top value (model units) across videos.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+def render(input_file, output, compare, model, template, fps, size, views, error_scale, quiet):
+    """Render an animation file IN to a preview video with its sound."""
+    from facegen.render import render as run
+
+    if model and template:
+        raise FacegenError("--model and --template cannot be used together: pass one reference")
+    mesh = template
+    if model:
+        from facegen.bundle import load_bundle
+
+        mesh = load_bundle(model).template
+    result = run(input_file, output, size=size, views=views, compare=compare, template=mesh, fps=fps,
+                 error_scale=error_scale, progress=not quiet)
+    for note in result.notes:
+        click.echo(f"facegen: {note}", err=True)
+    click.echo(str(result.path))
 
 
 @cli.command()

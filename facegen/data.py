@@ -497,8 +497,7 @@ class Dataset:
             return []
         words = align.align(samples, sr, transcript)
         cached.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(cached) as tmp:
-            align.write_alignment(words, tmp)
+        align.write_alignment(words, cached)  # atomically
         return words
 
     def load(self, sequences: SequenceABC[Sequence], features: FeatureConfig, filters: np.ndarray,
@@ -683,8 +682,7 @@ class DatasetWriter:
             from facegen.align import write_alignment
 
             (self.root / "alignments").mkdir(exist_ok=True)
-            with atomic_path(self.root / "alignments" / f"{name}.json") as tmp:
-                write_alignment(words, tmp)
+            write_alignment(words, self.root / "alignments" / f"{name}.json")  # atomically
 
     def write_wav(self, name: str, audio: np.ndarray, sample_rate: int) -> None:
         import soundfile as sf

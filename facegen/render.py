@@ -4,14 +4,18 @@ Renderer: a z-buffer software rasteriser compiled with numba (already installed 
 over the GPU-style options after measuring on this 2-core, GPU-less machine with the BIWI template
 (46,068 triangles, one 512 x 512 view):
 
-    numba rasteriser, 1 thread      ~8 ms per view (2x supersampled: ~22 ms)
-    moderngl on Mesa llvmpipe (EGL) ~30 ms per view without anti-aliasing, ~45 ms with 4x MSAA,
-                                    and both cores busy
+    numba rasteriser (this module)   ~17 ms CPU per view with 2 x 2 supersampling, on one core
+                                     (z-buffer 8 ms + shading 9 ms; ~36 ms per two-view frame)
+    moderngl on Mesa llvmpipe (EGL)  ~30 ms per view without anti-aliasing, ~45 ms with 4x MSAA,
+                                     using both cores, plus system packages (libegl1, libgl1-mesa-dri)
+    plain numpy (vectorised)         no z-buffer without a per-pixel scatter-min: far slower
+
+A 5 s clip (125 frames x 2 views) costs ~5.5 s of CPU including H.264 encoding: ~3 s on two free cores.
 
 The numba kernels release the GIL, so two frames render at once on two threads while ffmpeg encodes.
 Nothing outside PyPI is needed: no EGL/OSMesa system libraries, no display, and the pixels are the same on
-every machine (tests can reason about them). The first call compiles the kernels (~1-2 s); numba caches
-them beside this module (or in its user cache) for later runs.
+every machine (tests can reason about them). The first call on a new install compiles the kernels (a few
+seconds); numba caches them beside this module (or in its user cache) for later runs.
 
 Image: per-pixel (Phong) shading of interpolated vertex normals, a key light from the upper left and a
 fill light from the right (fixed to the camera, so every view is lit alike), a neutral skin colour, a
@@ -175,8 +179,17 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray, out: np.ndarray) ->
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def _to_view(vertices: np.ndarray, normals: np.ndarray, eye: np.ndarray, rotation: np.ndarray, focal: float,
-             centre: float, xy: np.ndarray, inv_depth: np.ndarray, view_normals: np.ndarray) -> None:
+def _to_view(
+    vertices: np.ndarray,
+    normals: np.ndarray,
+    eye: np.ndarray,
+    rotation: np.ndarray,
+    focal: float,
+    centre: float,
+    xy: np.ndarray,
+    inv_depth: np.ndarray,
+    view_normals: np.ndarray,
+) -> None:
     """Camera.project for the rasteriser (xy pixels, 1/depth or -1 behind the camera) and the normals
     in view space (x right, y up, z towards the viewer)."""
     for i in range(vertices.shape[0]):
@@ -204,8 +217,14 @@ SUBPIXEL = 256  # vertex positions snap to 1/256 pixel: exact integer edge funct
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def _rasterize(xy: np.ndarray, inv_depth: np.ndarray, faces: np.ndarray,
-               tri: np.ndarray, bary: np.ndarray, zbuf: np.ndarray) -> None:
+def _rasterize(
+    xy: np.ndarray,
+    inv_depth: np.ndarray,
+    faces: np.ndarray,
+    tri: np.ndarray,
+    bary: np.ndarray,
+    zbuf: np.ndarray,
+) -> None:
     """Z-buffer the triangles: per pixel, the nearest triangle and its perspective-correct barycentrics.
 
     xy: [V, 2] pixel coordinates, inv_depth: [V] 1/depth (<= 0 behind the camera), tri: [H, W] out
@@ -237,7 +256,11 @@ def _rasterize(xy: np.ndarray, inv_depth: np.ndarray, faces: np.ndarray,
         xmin, xmax = max(math.ceil(lo_x), 0), min(math.floor(hi_x), width - 1)
         ymin, ymax = max(math.ceil(lo_y), 0), min(math.floor(hi_y), height - 1)
         # edge function of corner k at pixel centre (cx, cy), times sign: >= 0 on the triangle's side
-        step0, step1, step2 = (Y1 - Y2) * SUBPIXEL * sign, (Y2 - Y0) * SUBPIXEL * sign, (Y0 - Y1) * SUBPIXEL * sign
+        step0, step1, step2 = (
+            (Y1 - Y2) * SUBPIXEL * sign,
+            (Y2 - Y0) * SUBPIXEL * sign,
+            (Y0 - Y1) * SUBPIXEL * sign,
+        )
         cx = xmin * SUBPIXEL + SUBPIXEL // 2
         da, db = za - zc, zb - zc
         for py in range(ymin, ymax + 1):
@@ -260,8 +283,18 @@ def _rasterize(xy: np.ndarray, inv_depth: np.ndarray, faces: np.ndarray,
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def _shade(tri: np.ndarray, bary: np.ndarray, faces: np.ndarray, normals: np.ndarray, colors: np.ndarray,
-           lights: np.ndarray, background: np.ndarray, srgb: np.ndarray, ss: int, out: np.ndarray) -> None:
+def _shade(
+    tri: np.ndarray,
+    bary: np.ndarray,
+    faces: np.ndarray,
+    normals: np.ndarray,
+    colors: np.ndarray,
+    lights: np.ndarray,
+    background: np.ndarray,
+    srgb: np.ndarray,
+    ss: int,
+    out: np.ndarray,
+) -> None:
     """Shade each output pixel from its ss x ss samples and write sRGB uint8.
 
     The samples' interpolated normals and colours are averaged (normals flipped towards the camera:
@@ -374,8 +407,14 @@ def _lights() -> np.ndarray:
 class Renderer:
     """Renders one mesh topology in fixed views; holds per-thread scratch buffers. Thread-safe."""
 
-    def __init__(self, faces: np.ndarray, template: np.ndarray, size: int = 512,
-                 views: Sequence[str] = DEFAULT_VIEWS, supersample: int = 2) -> None:
+    def __init__(
+        self,
+        faces: np.ndarray,
+        template: np.ndarray,
+        size: int = 512,
+        views: Sequence[str] = DEFAULT_VIEWS,
+        supersample: int = 2,
+    ) -> None:
         self.size = check_size(size)
         self.views = check_views(views)
         self.cameras = frame_cameras(template, self.views, self.size)
@@ -422,11 +461,30 @@ class Renderer:
         inv_depth = np.empty(len(vertices), np.float32)
         view_normals = np.empty_like(vertices)
         for k, cam in enumerate(self.cameras):
-            _to_view(vertices, normals, cam.eye.astype(np.float32), cam.rotation.astype(np.float32),
-                     cam.focal * self.ss, cam.size * self.ss / 2, xy, inv_depth, view_normals)
+            _to_view(
+                vertices,
+                normals,
+                cam.eye.astype(np.float32),
+                cam.rotation.astype(np.float32),
+                cam.focal * self.ss,
+                cam.size * self.ss / 2,
+                xy,
+                inv_depth,
+                view_normals,
+            )
             _rasterize(xy, inv_depth, self.faces, tri, bary, zbuf)
-            _shade(tri, bary, self.faces, view_normals, linear, self.lights, self.background, self.srgb, self.ss,
-                   out[:, k * self.size:(k + 1) * self.size])
+            _shade(
+                tri,
+                bary,
+                self.faces,
+                view_normals,
+                linear,
+                self.lights,
+                self.background,
+                self.srgb,
+                self.ss,
+                out[:, k * self.size : (k + 1) * self.size],
+            )
 
     def render(self, vertices: np.ndarray, colors: np.ndarray | None = None) -> np.ndarray:
         """One frame, every view side by side: [size, size * len(views), 3] uint8 sRGB."""
@@ -436,14 +494,29 @@ class Renderer:
 
 
 def check_size(size: int) -> int:
-    if not isinstance(size, (int, np.integer)) or size < 64 or size % 2:
-        raise FacegenError(f"render size must be an even number of pixels >= 64, got {size}: e.g. --size 512")
+    if not isinstance(size, (int, np.integer)) or not 64 <= size <= 2048 or size % 2:
+        raise FacegenError(
+            f"render size must be an even number of pixels from 64 to 2048, got {size}: e.g. --size 512"
+        )
     return int(size)
 
 
-def render_image(vertices: np.ndarray, faces: np.ndarray, template: np.ndarray | None = None, *,
-                 size: int = 512, views: Sequence[str] = DEFAULT_VIEWS,
-                 colors: np.ndarray | None = None) -> np.ndarray:
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the render kernels now, e.g. at install time: a tiny render."""
+    vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    faces = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    Renderer(faces, vertices, 64).render(vertices, np.full((4, 3), 0.5, np.float32))
+
+
+def render_image(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    template: np.ndarray | None = None,
+    *,
+    size: int = 512,
+    views: Sequence[str] = DEFAULT_VIEWS,
+    colors: np.ndarray | None = None,
+) -> np.ndarray:
     """One shaded image [size, size * len(views), 3] uint8 of a mesh (e.g. per-vertex values as colors)."""
     template = vertices if template is None else template
     return Renderer(faces, template, size, views).render(vertices, colors)
@@ -458,8 +531,12 @@ def write_png(image: np.ndarray, path: str | os.PathLike) -> Path:
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
-    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
-           + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
+    png = (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(raw, 6))
+        + chunk(b"IEND", b"")
+    )
     with atomic_path(path) as tmp:
         tmp.write_bytes(png)
     return Path(path)
@@ -469,35 +546,72 @@ def write_png(image: np.ndarray, path: str | os.PathLike) -> Path:
 
 # 5 x 7 bitmap font: 7 rows of 5 bits (hex byte each), most significant bit on the left
 _FONT = {
-    "A": "0E11111F111111", "B": "1E11111E11111E", "C": "0E11101010110E", "D": "1C12111111121C",
-    "E": "1F10101E10101F", "F": "1F10101E101010", "G": "0E11101711110F", "H": "1111111F111111",
-    "I": "0E04040404040E", "J": "0702020202120C", "K": "11121418141211", "L": "1010101010101F",
-    "M": "111B1515111111", "N": "11111915131111", "O": "0E11111111110E", "P": "1E11111E101010",
-    "Q": "0E11111115120D", "R": "1E11111E141211", "S": "0F10100E01011E", "T": "1F040404040404",
-    "U": "1111111111110E", "V": "11111111110A04", "W": "1111111515150A",
-    "X": "11110A040A1111", "Y": "11110A04040404", "Z": "1F01020408101F",
-    "0": "0E11131519110E", "1": "040C040404040E", "2": "0E11010204081F",
-    "3": "1F02040201110E", "4": "02060A121F0202", "5": "1F101E0101110E", "6": "0608101E11110E",
-    "7": "1F010204080808", "8": "0E11110E11110E", "9": "0E11110F01020C",
-    ".": "00000000000C0C", "-": "0000001F000000", "|": "04040404040404",
-    "%": "18190204081303", ":": "000C0C000C0C00", "=": "00001F001F0000", "(": "02040808080402",
-    ")": "08040202020408", "/": "01010204081010", "+": "0004041F040400", ",": "000000000C0408",
-    "_": "0000000000001F", " ": "00000000000000", "?": "0E110102040004",
+    "A": "0E11111F111111",
+    "B": "1E11111E11111E",
+    "C": "0E11101010110E",
+    "D": "1C12111111121C",
+    "E": "1F10101E10101F",
+    "F": "1F10101E101010",
+    "G": "0E11101711110F",
+    "H": "1111111F111111",
+    "I": "0E04040404040E",
+    "J": "0702020202120C",
+    "K": "11121418141211",
+    "L": "1010101010101F",
+    "M": "111B1515111111",
+    "N": "11111915131111",
+    "O": "0E11111111110E",
+    "P": "1E11111E101010",
+    "Q": "0E11111115120D",
+    "R": "1E11111E141211",
+    "S": "0F10100E01011E",
+    "T": "1F040404040404",
+    "U": "1111111111110E",
+    "V": "11111111110A04",
+    "W": "1111111515150A",
+    "X": "11110A040A1111",
+    "Y": "11110A04040404",
+    "Z": "1F01020408101F",
+    "0": "0E11131519110E",
+    "1": "040C040404040E",
+    "2": "0E11010204081F",
+    "3": "1F02040201110E",
+    "4": "02060A121F0202",
+    "5": "1F101E0101110E",
+    "6": "0608101E11110E",
+    "7": "1F010204080808",
+    "8": "0E11110E11110E",
+    "9": "0E11110F01020C",
+    ".": "00000000000C0C",
+    "-": "0000001F000000",
+    "|": "04040404040404",
+    "%": "18190204081303",
+    ":": "000C0C000C0C00",
+    "=": "00001F001F0000",
+    "(": "02040808080402",
+    ")": "08040202020408",
+    "/": "01010204081010",
+    "+": "0004041F040400",
+    ",": "000000000C0408",
+    "_": "0000000000001F",
+    " ": "00000000000000",
+    "?": "0E110102040004",
 }
 
 
-def draw_text(image: np.ndarray, text: str, x: int, y: int, scale: int = 2,
-              color: Sequence[float] = TEXT) -> int:
+def draw_text(
+    image: np.ndarray, text: str, x: int, y: int, scale: int = 2, color: Sequence[float] = TEXT
+) -> int:
     """Draw `text` (upper-cased) into image at top-left (x, y) in a 5x7 pixel font; return the end x."""
     rgb = np.asarray(np.asarray(color) * 255 + 0.5, np.uint8)
     for ch in text.upper():
         rows = _FONT.get(ch, _FONT["?"])
         for r in range(7):
-            bits = int(rows[2 * r:2 * r + 2], 16)
+            bits = int(rows[2 * r : 2 * r + 2], 16)
             for col in range(5):
                 if bits & (0x10 >> col):
                     y0, x0 = y + r * scale, x + col * scale
-                    image[max(y0, 0):max(y0 + scale, 0), max(x0, 0):max(x0 + scale, 0)] = rgb
+                    image[max(y0, 0) : max(y0 + scale, 0), max(x0, 0) : max(x0 + scale, 0)] = rgb
         x += 6 * scale
     return x
 
@@ -506,8 +620,9 @@ def text_width(text: str, scale: int = 2) -> int:
     return 6 * scale * len(text) - scale
 
 
-def compare_overlay(size: int, views: int, vmax: float, face_size: float,
-                    labels: tuple[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def compare_overlay(
+    size: int, views: int, vmax: float, face_size: float, labels: tuple[str, str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The compare video's captions, drawn once: pixel rows, columns and their RGB colours.
 
     A title strip names A and B at the top of each half; a line at the bottom of B's half shows the colour
@@ -529,8 +644,8 @@ def compare_overlay(size: int, views: int, vmax: float, face_size: float,
     right -= 3 * scale
     if right - left > 8:
         ramp = heat_colors(np.linspace(0, 1, right - left), 1.0)
-        canvas[y + scale:y + line - scale, left:right] = (ramp * 255 + 0.5).astype(np.uint8)[None]
-        drawn[y + scale:y + line - scale, left:right] = True
+        canvas[y + scale : y + line - scale, left:right] = (ramp * 255 + 0.5).astype(np.uint8)[None]
+        drawn[y + scale : y + line - scale, left:right] = True
     ys, xs = np.nonzero(drawn)
     return ys, xs, canvas[ys, xs]
 
@@ -583,29 +698,81 @@ def _clip_audio(anim: Animation, frames: int) -> np.ndarray | None:
     return np.pad(audio, (0, n - len(audio))) if len(audio) < n else audio
 
 
-def _encode(frames, count: int, width: int, height: int, fps: float, audio: np.ndarray | None,
-            sample_rate: int, path: Path, progress: bool) -> None:
+def _encode(
+    frames,
+    count: int,
+    width: int,
+    height: int,
+    fps: float,
+    audio: np.ndarray | None,
+    sample_rate: int,
+    path: Path,
+    progress: bool,
+) -> None:
     """Pipe `count` rgb24 frames (an iterator of arrays) to ffmpeg and mux the audio; write `path`."""
     import soundfile as sf
     from tqdm import tqdm
 
     with tempfile.TemporaryDirectory(prefix="facegen-render-") as tmp:
-        cmd = [_ffmpeg(), "-hide_banner", "-nostats", "-loglevel", "error", "-y",
-               "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-framerate", _rate(fps),
-               "-i", "pipe:0"]
+        cmd = [
+            _ffmpeg(),
+            "-hide_banner",
+            "-nostats",
+            "-loglevel",
+            "error",
+            "-y",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "rgb24",
+            "-s",
+            f"{width}x{height}",
+            "-framerate",
+            _rate(fps),
+            "-i",
+            "pipe:0",
+        ]
         if audio is not None:
             wav = Path(tmp) / "audio.wav"
             sf.write(wav, audio, int(sample_rate), subtype="FLOAT")
-            cmd += ["-i", str(wav), "-map", "0:v:0", "-map", "1:a:0", "-c:a", "aac", "-b:a", "160k",
-                    "-ar", "48000"]
-        cmd += ["-c:v", "libx264", "-preset", "veryfast", "-crf", "18", "-pix_fmt", "yuv420p",
-                "-movflags", "+faststart", str(path)]
+            cmd += [
+                "-i",
+                str(wav),
+                "-map",
+                "0:v:0",
+                "-map",
+                "1:a:0",
+                "-c:a",
+                "aac",
+                "-b:a",
+                "160k",
+                "-ar",
+                "48000",
+            ]
+        cmd += [
+            "-c:v",
+            "libx264",
+            "-preset",
+            "veryfast",
+            "-crf",
+            "18",
+            "-pix_fmt",
+            "yuv420p",
+            "-movflags",
+            "+faststart",
+            str(path),
+        ]
         # ffmpeg's messages go to a file, not a pipe, so it can never block on them
-        with open(Path(tmp) / "ffmpeg.log", "w+b") as log, tqdm(total=count, unit="frame", desc="render", disable=not progress, file=sys.stderr,
-                       leave=False) as bar:
+        with (
+            open(Path(tmp) / "ffmpeg.log", "w+b") as log,
+            tqdm(
+                total=count, unit="frame", desc="render", disable=not progress, file=sys.stderr, leave=False
+            ) as bar,
+        ):
             # own session: a terminal's Ctrl-C reaches only us; we stop ffmpeg ourselves
-            proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
-                                    start_new_session=True)
+            proc = subprocess.Popen(
+                cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True
+            )
             try:
                 for frame in frames:
                     proc.stdin.write(frame.data)
@@ -656,16 +823,26 @@ def check_output(path: str | os.PathLike) -> Path:
     path = Path(path)
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise FacegenError(
-            f"cannot write a video to {path.name!r}: use a {', '.join(VIDEO_SUFFIXES)} file name (-o preview.mp4)"
+            f"cannot write a video to {path.name!r}: use a {', '.join(VIDEO_SUFFIXES)} file name "
+            "(-o preview.mp4)"
         )
     check_writable(path)
     return path
 
 
-def render_animation(anim: Animation, path: str | os.PathLike, *, size: int = 512,
-                     views: Sequence[str] = DEFAULT_VIEWS, compare: Animation | None = None,
-                     error_scale: float | None = None, labels: tuple[str, str] = ("A", "B"),
-                     progress: bool = True, threads: int | None = None, supersample: int = 2) -> RenderResult:
+def render_animation(
+    anim: Animation,
+    path: str | os.PathLike,
+    *,
+    size: int = 512,
+    views: Sequence[str] = DEFAULT_VIEWS,
+    compare: Animation | None = None,
+    error_scale: float | None = None,
+    labels: tuple[str, str] = ("A", "B"),
+    progress: bool = True,
+    threads: int | None = None,
+    supersample: int = 2,
+) -> RenderResult:
     """Render `anim` to an MP4 at its fps with its audio: the views side by side, `size` px square each.
 
     compare: another animation of the same topology (ground truth, another model): the video is twice as
@@ -682,15 +859,18 @@ def render_animation(anim: Animation, path: str | os.PathLike, *, size: int = 51
     notes: list[str] = []
     renderer = Renderer(anim.faces, anim.template, size, views, supersample)
     frames, audio_source = anim.num_frames, anim
-    errors = vmax = None
+    vmax = None
     if compare is not None:
         check_animation(compare)
         _check_finite(compare, "the comparison animation")
         frames = _check_comparable(anim, compare, labels, notes)
-        errors = np.linalg.norm(anim.vertices[:frames] - compare.vertices[:frames], axis=-1)  # [T, V]
         if error_scale is not None and not error_scale > 0:
             raise FacegenError(f"the error scale must be a positive distance, got {error_scale}")
-        vmax = float(error_scale) if error_scale is not None else float(errors.max())
+        vmax = (
+            float(error_scale)
+            if error_scale is not None
+            else max(float(_vertex_errors(anim, compare, t).max()) for t in range(frames))
+        )
         if not vmax > 0:
             vmax = max(anim.size, 1e-12) * 1e-3  # identical clips: any positive scale shows all grey
             notes.append("the two animations are identical")
@@ -703,9 +883,10 @@ def render_animation(anim: Animation, path: str | os.PathLike, *, size: int = 51
 
     def render_one(t: int) -> np.ndarray:
         frame = np.empty((height, width, 3), np.uint8)
-        renderer.render_into(anim.vertices[t], frame[:, :renderer.width])
+        renderer.render_into(anim.vertices[t], frame[:, : renderer.width])
         if compare is not None:
-            renderer.render_into(compare.vertices[t], frame[:, renderer.width:], heat_colors(errors[t], vmax))
+            colors = heat_colors(_vertex_errors(anim, compare, t), vmax)
+            renderer.render_into(compare.vertices[t], frame[:, renderer.width :], colors)
             frame[overlay[0], overlay[1]] = overlay[2]
         return frame
 
@@ -718,35 +899,62 @@ def render_animation(anim: Animation, path: str | os.PathLike, *, size: int = 51
             _encode(rendered, frames, width, height, anim.fps, audio, audio_source.sample_rate, tmp, progress)
     finally:
         rendered.close()  # on an error: stop the render threads before returning
-    return RenderResult(path, width, height, frames, float(anim.fps), audio is not None,
-                        time.perf_counter() - start, vmax, notes)
+    return RenderResult(
+        path,
+        width,
+        height,
+        frames,
+        float(anim.fps),
+        audio is not None,
+        time.perf_counter() - start,
+        vmax,
+        notes,
+    )
+
+
+def _vertex_errors(a: Animation, b: Animation, t: int) -> np.ndarray:
+    """|A - B| per vertex at frame t (Euclidean distance, mesh units)."""
+    return np.linalg.norm(
+        np.asarray(a.vertices[t], np.float32) - np.asarray(b.vertices[t], np.float32), axis=-1
+    )
 
 
 def _check_finite(anim: Animation, what: str) -> None:
     bad = ~np.isfinite(np.asarray(anim.vertices)).all(axis=(1, 2))
     if bad.any():
-        raise FacegenError(f"{what} has NaN or infinite vertex positions in frame {int(np.argmax(bad))}: "
-                           "re-export it")
+        raise FacegenError(
+            f"{what} has NaN or infinite vertex positions in frame {int(np.argmax(bad))}: re-export it"
+        )
 
 
 def _check_comparable(a: Animation, b: Animation, labels: tuple[str, str], notes: list[str]) -> int:
     """The number of frames to compare; a FacegenError for a different topology, fps or clip."""
     name_a, name_b = labels
-    if a.num_vertices != b.num_vertices or a.faces.shape != b.faces.shape or not np.array_equal(a.faces, b.faces):
+    if (
+        a.num_vertices != b.num_vertices
+        or a.faces.shape != b.faces.shape
+        or not np.array_equal(a.faces, b.faces)
+    ):
         raise FacegenError(
             f"cannot compare {name_a} ({a.num_vertices} vertices, {len(a.faces)} triangles) with {name_b} "
-            f"({b.num_vertices} vertices, {len(b.faces)} triangles): compare animations of the same mesh topology"
+            f"({b.num_vertices} vertices, {len(b.faces)} triangles): "
+            "compare animations of the same mesh topology"
         )
     if abs(a.fps - b.fps) > 1e-6:
-        raise FacegenError(f"{name_a} is at {a.fps:g} fps but {name_b} at {b.fps:g} fps: compare clips at one "
-                           "frame rate (resample one, or pass --fps for .npy files)")
+        raise FacegenError(
+            f"{name_a} is at {a.fps:g} fps but {name_b} at {b.fps:g} fps: compare clips at one "
+            "frame rate (resample one, or pass --fps for .npy files)"
+        )
     if a.num_frames != b.num_frames:
         shorter, longer = sorted((a.num_frames, b.num_frames))
         if longer - shorter > max(5, round(0.1 * longer)):
-            raise FacegenError(f"{name_a} has {a.num_frames} frames but {name_b} has {b.num_frames}: these are "
-                               "not the same clip; compare two animations of one utterance")
-        notes.append(f"{name_a} has {a.num_frames} frames and {name_b} {b.num_frames}: "
-                     f"comparing the first {shorter}")
+            raise FacegenError(
+                f"{name_a} has {a.num_frames} frames but {name_b} has {b.num_frames}: these are "
+                "not the same clip; compare two animations of one utterance"
+            )
+        notes.append(
+            f"{name_a} has {a.num_frames} frames and {name_b} {b.num_frames}: comparing the first {shorter}"
+        )
         return shorter
     return a.num_frames
 
@@ -763,8 +971,9 @@ def load_template(template: Mesh | str | os.PathLike | None) -> Mesh | None:
     return read_mesh(template)
 
 
-def read_input(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None,
-               what: str = "input") -> Animation:
+def read_input(
+    path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None, what: str = "input"
+) -> Animation:
     """Read an animation file for rendering, with one-line errors for the usual mistakes."""
     from facegen.exchange import format_module, read_animation
 
@@ -773,15 +982,26 @@ def read_input(path: str | os.PathLike, template: Mesh | None = None, fps: float
     if not path.is_file():
         raise FacegenError(f"{what} {path} does not exist: pass an animation file facegen wrote")
     if path.suffix.lower() == ".npy" and template is None:
-        raise FacegenError(f"{path.name} stores only vertex positions: pass --model BUNDLE or --template MESH "
-                           "to give its faces")
+        raise FacegenError(
+            f"{path.name} stores only vertex positions: pass --model BUNDLE or --template MESH "
+            "to give its faces"
+        )
     return read_animation(path, template=template, fps=fps)
 
 
-def render(input: Animation | str | os.PathLike, output: str | os.PathLike, *, size: int = 512,
-           views: Sequence[str] | str = DEFAULT_VIEWS, compare: Animation | str | os.PathLike | None = None,
-           template: Mesh | str | os.PathLike | None = None, fps: float | None = None,
-           error_scale: float | None = None, progress: bool = True, threads: int | None = None) -> RenderResult:
+def render(
+    input: Animation | str | os.PathLike,
+    output: str | os.PathLike,
+    *,
+    size: int = 512,
+    views: Sequence[str] | str = DEFAULT_VIEWS,
+    compare: Animation | str | os.PathLike | None = None,
+    template: Mesh | str | os.PathLike | None = None,
+    fps: float | None = None,
+    error_scale: float | None = None,
+    progress: bool = True,
+    threads: int | None = None,
+) -> RenderResult:
     """Render an animation (object or file: .usd*, .glb/.gltf, .npy with `template`) to a preview video.
 
     compare: a second animation (object or file) of the same topology: see render_animation. A .npy
@@ -804,12 +1024,27 @@ def render(input: Animation | str | os.PathLike, output: str | os.PathLike, *, s
             stores_fps = compare.suffix.lower() != ".npy"
             own = mesh if mesh is not None else Mesh(np.asarray(anim.template, np.float32), anim.faces)
             other = read_input(compare, own, None if stores_fps else anim.fps, what="comparison file")
-    return render_animation(anim, path, size=size, views=views, compare=other, error_scale=error_scale,
-                            labels=(label_a, label_b), progress=progress, threads=threads)
+    return render_animation(
+        anim,
+        path,
+        size=size,
+        views=views,
+        compare=other,
+        error_scale=error_scale,
+        labels=(label_a, label_b),
+        progress=progress,
+        threads=threads,
+    )
 
 
-def render_still(input: Animation | Mesh, path: str | os.PathLike, *, frame: int = 0, size: int = 512,
-                 views: Sequence[str] | str = DEFAULT_VIEWS) -> Path:
+def render_still(
+    input: Animation | Mesh,
+    path: str | os.PathLike,
+    *,
+    frame: int = 0,
+    size: int = 512,
+    views: Sequence[str] | str = DEFAULT_VIEWS,
+) -> Path:
     """Write one frame of an animation (or a mesh at rest) as a PNG, the views side by side."""
     if isinstance(input, Mesh):
         vertices, faces, template = input.vertices, input.faces, input.vertices
@@ -819,4 +1054,3 @@ def render_still(input: Animation | Mesh, path: str | os.PathLike, *, frame: int
         vertices, faces, template = input.vertices[frame], input.faces, input.template
     image = render_image(vertices, faces, template, size=size, views=check_views(views))
     return write_png(image, path)
-

@@ -302,6 +302,7 @@ def train(
     threads: int | None = None,
     quiet: bool = False,
     half: bool = False,
+    precision: str | None = None,
     warn: Warn | None = warn_stderr,
 ) -> TrainResult:
     """Train a model on the dataset at `data_root` and write the best checkpoint as a bundle.
@@ -310,7 +311,8 @@ def train(
     `text_backend` (+ `text_model_path`) the language model (facegen.text). `max_sequences` caps the
     training and validation sequences (taken round-robin over subjects). `model_options` overrides
     ModelConfig sizes (e.g. small models for tests). `on_bad` "skip" reports and skips unusable
-    sequences, "fail" stops at the first. `half` stores the bundle's weights as float16.
+    sequences, "fail" stops at the first. `precision` (fp32, fp16, int8; see facegen.bundle) is how the
+    bundle stores its weights; `half=True` is short for precision="fp16". Checkpoints are always fp32.
     """
     say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
     warn = warn or (lambda _m: None)
@@ -460,7 +462,7 @@ def train(
             "batch_size": batch_size, "device": str(dev)})
         from facegen.bundle import save_bundle
 
-        save_bundle(bundle, out_bundle, half=half)
+        save_bundle(bundle, out_bundle, precision=precision or ("fp16" if half else "fp32"))
         say(f"wrote {out_bundle} (best epoch {best_epoch}, {'validation' if val_batches else 'training'} "
             f"loss {best_loss:.4e}); curves in {csv_path}" + (f" and {png_path}" if png_path else ""))
     skipped = list(dataset.skipped)

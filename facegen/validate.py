@@ -238,12 +238,15 @@ def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], 
         report.add("blendshapes", False, str(exc))
         return [], []
     size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
-    diff = float(np.sqrt(((evaluated.astype(np.float64) - frames[middle]) ** 2).sum(1)).max())
+    finite = np.isfinite(evaluated).all(1)
+    same = np.array_equal(finite, np.isfinite(frames[middle]).all(1))  # NaN is the "finite" check's failure
+    diff = np.sqrt(((evaluated[finite].astype(np.float64) - frames[middle][finite]) ** 2).sum(1)).max(initial=0.0)
+    agree = same and diff <= SKEL_AGREEMENT * size
     report.add(
         "blendshapes",
-        diff <= SKEL_AGREEMENT * size,
+        agree,
         f"{usd_skel.describe(names)} x {len(times)} frames; UsdSkel's evaluation at time {times[middle]:g} "
-        f"is {diff:.2g} from the blend" + ("" if diff <= SKEL_AGREEMENT * size else " (they disagree)"),
+        f"is {diff:.2g} from the blend" + ("" if agree else " (they disagree)"),
     )
     info = stage.GetRootLayer().customLayerData.get("facegen", {})
     stated = info.get("reconstruction") if isinstance(info, dict) else None

@@ -31,7 +31,7 @@ def test_round_trip_keeps_weights_template_and_metadata(tmp_path, grid_mesh):
 def test_half_precision_bundle_is_smaller_and_close(tmp_path, grid_mesh):
     b = make_bundle(grid_mesh)
     save_bundle(b, tmp_path / "f32.safetensors")
-    save_bundle(b, tmp_path / "f16.safetensors", half=True)
+    save_bundle(b, tmp_path / "f16.safetensors", precision="fp16")
     weight_bytes = sum(v.numel() * 4 for v in b.model.state_dict().values() if v.is_floating_point())
     saved = (tmp_path / "f32.safetensors").stat().st_size - (tmp_path / "f16.safetensors").stat().st_size
     assert abs(saved - weight_bytes / 2) < 0.01 * weight_bytes
@@ -71,3 +71,19 @@ def test_biwi_sized_bundle(tmp_path, biwi_template):
     back = load_bundle(b.path)
     assert back.template.num_vertices == 23370 and back.template.faces.shape == (46068, 3)
     assert len(back.template.regions["lips"]) == 4996
+
+
+def test_int8_bundle_quarter_size_and_close(tmp_path, biwi_template):
+    b = make_bundle(biwi_template, small=False)
+    save_bundle(b, tmp_path / "f32.safetensors")
+    save_bundle(b, tmp_path / "i8.safetensors", precision="int8")
+    size32 = (tmp_path / "f32.safetensors").stat().st_size
+    size8 = (tmp_path / "i8.safetensors").stat().st_size
+    assert size8 < 0.3 * size32
+    back = load_bundle(tmp_path / "i8.safetensors")
+    w, wq = b.model.fc_out.weight, back.model.fc_out.weight
+    row_max = w.abs().amax(1, keepdim=True)
+    assert torch.all((w - wq).abs() <= row_max / 254 + 1e-7)
+    assert read_metadata(tmp_path / "i8.safetensors")["weights_precision"] == "int8"
+    with pytest.raises(FacegenError, match="unknown precision"):
+        save_bundle(b, tmp_path / "x.safetensors", precision="int4")

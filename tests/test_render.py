@@ -1,4 +1,4 @@
-"""Preview videos: streams and durations read back with ffmpeg, pixels decoded back, compare layout, errors."""
+"""Preview videos: streams and durations read back with ffmpeg, pixels decoded, compare layout, errors."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def talking_clip(mesh: Mesh, frames: int = FRAMES) -> Animation:
     """The mesh at rest for the first half; in the second half its lower lip region drops by 4% of the face
     size while a 330 Hz tone plays. Silence in the first half."""
     vertices = np.repeat(mesh.vertices[None], frames, 0).astype(np.float32)
-    vertices[frames // 2:, lower_lip(mesh), 1] -= 0.04 * mesh.size
+    vertices[frames // 2 :, lower_lip(mesh), 1] -= 0.04 * mesh.size
     t = np.arange(round(frames / FPS * RATE)) / RATE
     audio = np.where(t >= frames // 2 / FPS, 0.3 * np.sin(2 * np.pi * 330 * t), 0.0).astype(np.float32)
     return Animation(vertices, mesh.faces, FPS, mesh.vertices.copy(), audio, RATE, dict(mesh.regions))
@@ -39,8 +39,9 @@ def lower_lip(mesh: Mesh) -> np.ndarray:
 
 def streams(path) -> list[str]:
     """The 'Stream #..' lines ffmpeg prints for a file."""
-    err = subprocess.run([FFMPEG, "-hide_banner", "-i", str(path)], capture_output=True, text=True,
-                         check=False).stderr
+    err = subprocess.run(
+        [FFMPEG, "-hide_banner", "-i", str(path)], capture_output=True, text=True, check=False
+    ).stderr
     return [line.strip() for line in err.splitlines() if line.strip().startswith("Stream #")]
 
 
@@ -53,8 +54,26 @@ def decode_frames(path) -> np.ndarray:
 
 def decode_audio(path, rate: int = 48000) -> np.ndarray:
     """The audio stream decoded to mono float32 at `rate`."""
-    out = subprocess.run([FFMPEG, "-v", "error", "-i", str(path), "-map", "0:a:0", "-f", "f32le", "-ac", "1",
-                          "-ar", str(rate), "pipe:1"], capture_output=True, check=True).stdout
+    out = subprocess.run(
+        [
+            FFMPEG,
+            "-v",
+            "error",
+            "-i",
+            str(path),
+            "-map",
+            "0:a:0",
+            "-f",
+            "f32le",
+            "-ac",
+            "1",
+            "-ar",
+            str(rate),
+            "pipe:1",
+        ],
+        capture_output=True,
+        check=True,
+    ).stdout
     return np.frombuffer(out, np.float32)
 
 
@@ -94,8 +113,8 @@ def test_video_and_audio_streams_last_the_clip(grid_mesh, tmp_path, audio_second
     # the sound is the clip's, in sync: silent first half, the tone (RMS 0.3/sqrt 2) in the second
     half, margin, end = len(sound) // 2, int(0.05 * 48000), round(min(audio_seconds, FRAMES / FPS) * 48000)
     assert np.sqrt(np.mean(sound[: half - margin] ** 2)) < 0.01
-    assert abs(np.sqrt(np.mean(sound[half + margin:end - margin] ** 2)) - 0.3 / np.sqrt(2)) < 0.03
-    assert np.sqrt(np.mean(sound[end + margin:] ** 2)) < 0.01 if end + margin < len(sound) else True
+    assert abs(np.sqrt(np.mean(sound[half + margin : end - margin] ** 2)) - 0.3 / np.sqrt(2)) < 0.03
+    assert np.sqrt(np.mean(sound[end + margin :] ** 2)) < 0.01 if end + margin < len(sound) else True
 
 
 def test_frames_are_shaded_faces_on_the_background(grid_mesh, tmp_path):
@@ -168,28 +187,51 @@ def test_compare_frame_counts_topology_and_fps(grid_mesh, tmp_path):
     with pytest.raises(FacegenError, match="same mesh topology"):
         render_animation(a, tmp_path / "x.mp4", size=SIZE, compare=flipped, progress=False)
     with pytest.raises(FacegenError, match="not the same clip"):
-        render_animation(a, tmp_path / "x.mp4", size=SIZE, compare=Animation(a.vertices[:5], a.faces, FPS,
-                                                                            a.template), progress=False)
+        render_animation(
+            a,
+            tmp_path / "x.mp4",
+            size=SIZE,
+            compare=Animation(a.vertices[:5], a.faces, FPS, a.template),
+            progress=False,
+        )
     with pytest.raises(FacegenError, match="fps"):
-        render_animation(a, tmp_path / "x.mp4", size=SIZE, progress=False,
-                         compare=Animation(a.vertices, a.faces, 30.0, a.template))
+        render_animation(
+            a,
+            tmp_path / "x.mp4",
+            size=SIZE,
+            progress=False,
+            compare=Animation(a.vertices, a.faces, 30.0, a.template),
+        )
     assert not (tmp_path / "x.mp4").exists()
 
 
-def test_render_files_usd_and_npy_with_template(grid_mesh, tmp_path):
+def test_render_files_usd_glb_and_npy_with_template(grid_mesh, tmp_path):
     anim = talking_clip(grid_mesh)
     write_animation(anim, tmp_path / "clip.usda")
+    write_animation(anim, tmp_path / "clip.glb")
     write_animation(anim, tmp_path / "truth.npy", write_audio=False)
     write_mesh(grid_mesh, tmp_path / "face.ply")
-    result = render(tmp_path / "clip.usda", tmp_path / "clip.mp4", size=SIZE, views="front", progress=False)
-    assert (result.width, result.height, result.frames, result.has_audio) == (SIZE, SIZE, FRAMES, True)
-    result = render(tmp_path / "truth.npy", tmp_path / "npy.mp4", size=SIZE, template=tmp_path / "face.ply",
-                    progress=False)
+    for name in ("clip.usda", "clip.glb"):
+        result = render(tmp_path / name, tmp_path / f"{name}.mp4", size=SIZE, views="front", progress=False)
+        assert (result.width, result.height, result.frames, result.has_audio) == (SIZE, SIZE, FRAMES, True)
+        assert abs(len(decode_audio(result.path)) / 48000 - FRAMES / FPS) <= 1 / FPS
+    result = render(
+        tmp_path / "truth.npy",
+        tmp_path / "npy.mp4",
+        size=SIZE,
+        template=tmp_path / "face.ply",
+        progress=False,
+    )
     assert (result.width, result.frames, result.has_audio) == (2 * SIZE, FRAMES, False)
     assert [s for s in streams(result.path) if "Audio:" in s] == []
     # a .npy comparison takes the input's template and fps
-    result = render(tmp_path / "clip.usda", tmp_path / "cmp.mp4", size=SIZE, compare=tmp_path / "truth.npy",
-                    progress=False)
+    result = render(
+        tmp_path / "clip.usda",
+        tmp_path / "cmp.mp4",
+        size=SIZE,
+        compare=tmp_path / "truth.npy",
+        progress=False,
+    )
     assert result.width == 4 * SIZE and "identical" in " ".join(result.notes)
 
 
@@ -253,7 +295,9 @@ def test_cameras_frame_the_template_from_the_front_and_three_quarter(face):
     assert front.rotation[2] @ [0, 0, -1] == pytest.approx(1.0)  # looks along -Z, at the face
     yaw = np.degrees(np.arctan2(-three_quarter.rotation[2][0], -three_quarter.rotation[2][2]))
     assert yaw == pytest.approx(40.0)
-    assert np.linalg.norm(front.eye - centre) == pytest.approx(np.linalg.norm(three_quarter.eye - centre), 0.2)
+    assert np.linalg.norm(front.eye - centre) == pytest.approx(
+        np.linalg.norm(three_quarter.eye - centre), 0.2
+    )
 
 
 def test_still_png_and_identical_renders(grid_mesh, tmp_path):
@@ -273,10 +317,14 @@ def test_fine_mesh_renders_without_cracks():
     jitter = np.random.default_rng(0).uniform(-0.3, 0.3, (2, n, n)) / n
     jitter[:, [0, -1], :] = 0
     jitter[:, :, [0, -1]] = 0
-    vertices = np.stack([xs + jitter[0], ys + jitter[1], np.zeros_like(xs)], -1).reshape(-1, 3).astype(np.float32)
+    vertices = (
+        np.stack([xs + jitter[0], ys + jitter[1], np.zeros_like(xs)], -1).reshape(-1, 3).astype(np.float32)
+    )
     i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None]).ravel()
-    faces = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)]).astype(np.int32)
+    faces = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)]).astype(
+        np.int32
+    )
     image = Renderer(faces, vertices, SIZE, views=("front",)).render(vertices).astype(np.float32)
-    inside = image[SIZE // 4: 3 * SIZE // 4, SIZE // 4: 3 * SIZE // 4].sum(-1)
+    inside = image[SIZE // 4 : 3 * SIZE // 4, SIZE // 4 : 3 * SIZE // 4].sum(-1)
     assert len(faces) / (SIZE * 0.84) ** 2 > 1.5  # more than one triangle per pixel
     assert inside.min() > 0.97 * np.median(inside)  # a flat lit sheet: no dark (background) speckles

@@ -92,7 +92,7 @@ def write(
         raise FacegenError(f"{path} is not a glTF file name: use .glb or .gltf")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
-    basis = morph_basis(anim, parse_morph_targets(morph_targets), tolerance, unit_weights=True)
+    basis = morph_basis(anim, parse_morph_targets(morph_targets), tolerance, unit_weights=True, sparse=True)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     sound = mp3.encode(audio, anim.sample_rate) if audio is not None else None
     bin_path = path.with_suffix(".bin")
@@ -147,7 +147,25 @@ def build(
     position = accessor(base, "VEC3", ARRAY_BUFFER, with_bounds=True)
     normal = accessor(vertex_normals(base, faces), "VEC3", ARRAY_BUFFER)
     indices = accessor(faces.astype(index_type).reshape(-1), "SCALAR", ELEMENT_ARRAY_BUFFER, with_bounds=True)
-    targets = [{"POSITION": accessor(t, "VEC3", ARRAY_BUFFER, with_bounds=True)} for t in basis.targets]
+    def target_accessor(offsets: np.ndarray) -> int:
+        """A morph target's POSITION offsets: sparse (on zeros) when that is smaller than dense."""
+        moving = np.flatnonzero(np.any(offsets != 0, axis=1))
+        if len(moving) * (np.dtype(index_type).itemsize + 12) >= len(offsets) * 12:
+            return accessor(offsets, "VEC3", ARRAY_BUFFER, with_bounds=True)
+        if len(moving) == 0:
+            moving = np.zeros(1, np.int64)  # a sparse accessor needs at least one entry
+        ids = blob.add(moving.astype(index_type).tobytes(), None)
+        values = blob.add(np.ascontiguousarray(offsets[moving], np.float32).tobytes(), None)
+        sparse = g.Sparse(count=len(moving),
+                          indices=g.AccessorSparseIndices(bufferView=ids, componentType=index_component),
+                          values=g.AccessorSparseValues(bufferView=values))
+        accessors.append(g.Accessor(componentType=FLOAT, count=len(offsets), type="VEC3", sparse=sparse, byteOffset=None,
+                                    min=offsets.min(0).astype(float).tolist(),
+                                    max=offsets.max(0).astype(float).tolist()))
+        return len(accessors) - 1
+
+    index_component = UNSIGNED_SHORT if index_type is np.uint16 else UNSIGNED_INT
+    targets = [{"POSITION": target_accessor(t)} for t in basis.targets]
     times = np.arange(anim.num_frames, dtype=np.float64) / float(anim.fps)
     time_input = accessor(times.astype(np.float32), "SCALAR", None, with_bounds=True)
     weight_output = accessor(basis.weights.astype(np.float32).reshape(-1), "SCALAR", None)

@@ -29,8 +29,9 @@ DEFAULT_TOLERANCE = 1e-3  # largest vertex error, as a fraction of the face's bo
 MAX_FRAME_TARGETS = 300  # `k="all"` (one target per frame) is refused for longer clips
 _OVERSAMPLE = 16  # extra random directions in the range finder beyond the targets kept
 _FIRST_RANK = 48  # range finder size tried first when K is chosen from the tolerance
-_SEARCH_FRAMES = 400  # K is searched on at most this many evenly spaced frames, then checked on all
-_CHUNK = 3 * 1024  # columns (x, y, z of 1024 vertices) per block when measuring errors
+_SEARCH_FRAMES = (100, 400)  # K is searched on this many evenly spaced frames, then confirmed on all
+_TILE = (64, 3 * 2048)
+SPARSE_SEARCH_SHARE = 0.9  # with sparse=True, K is chosen for this share of the tolerance  # rows x columns (x, y, z of 2048 vertices) per block when measuring errors
 
 
 @dataclass
@@ -65,16 +66,22 @@ def morph_basis(
     tolerance: float = DEFAULT_TOLERANCE,
     *,
     unit_weights: bool = False,
+    sparse: bool = False,
     seed: int = 0,
 ) -> MorphBasis:
     """Morph targets for `anim`: `k=None` picks the fewest meeting `tolerance`; an int fixes K;
-    "all" makes one target per frame (exact; refused beyond MAX_FRAME_TARGETS frames)."""
+    "all" makes one target per frame (exact; refused beyond MAX_FRAME_TARGETS frames).
+
+    `sparse=True` zeroes, per vertex, the smallest target entries whose sum stays within the error
+    budget the components leave (K is chosen within SPARSE_SEARCH_SHARE of the tolerance), so targets
+    can be stored as sparse accessors; the stated max_error is measured after that.
+    """
     frames, template = _frames(anim)
     size = float(anim.size)
     if isinstance(k, str):
         if k.strip().lower() != "all":
             raise FacegenError(f"morph targets must be a number or 'all', got {k!r}")
-        return frame_basis(anim, tolerance=tolerance)
+        return frame_basis(anim, tolerance=tolerance, sparse=sparse)
     if k is not None and (int(k) != k or k < 1):
         raise FacegenError(f"the number of morph targets must be a whole number >= 1, got {k}")
     if not tolerance > 0:
@@ -87,8 +94,13 @@ def morph_basis(
         if k is not None:
             k = min(int(k), T)
             temporal, coeffs = _principal_components(flat, shift, min(T, k + _OVERSAMPLE), rng)
-            return _finish(flat, shift, temporal[:, :k], coeffs[:k], size, None, unit_weights)
-        return _search(flat, shift, size, tolerance, unit_weights, rng)
+            basis = _finish(flat, shift, temporal[:, :k], coeffs[:k], size, None, unit_weights)
+            return _sparsify(basis, flat, shift, 0.0) if sparse else basis
+        if not sparse:
+            return _search(flat, shift, size, tolerance, unit_weights, rng)
+        basis = _search(flat, shift, size, tolerance * SPARSE_SEARCH_SHARE, unit_weights, rng)
+        basis.tolerance = tolerance
+        return _sparsify(basis, flat, shift, tolerance * size - basis.max_error)
 
 
 def _search(
@@ -99,26 +111,33 @@ def _search(
     T = flat.shape[0]
     bound = tolerance * size
     rank = min(T, _FIRST_RANK)
-    rows = np.unique(np.linspace(0, T - 1, min(T, _SEARCH_FRAMES)).round().astype(np.int64))
+    subsets = [_even_rows(T, n) for n in _SEARCH_FRAMES if n < T] or [np.arange(T)]
     while True:
         temporal, coeffs = _principal_components(flat, shift, rank, rng)
-        usable = temporal.shape[1] if rank >= T else max(1, temporal.shape[1] - _OVERSAMPLE // 2)
-        # K on a subset of frames is a lower bound (cheap); then confirm on every frame from there
-        guess = _smallest_k(flat[rows], shift, temporal[rows], coeffs, 1, usable, bound)
-        k = None if guess is None else _smallest_k(flat, shift, temporal, coeffs, guess, usable, bound, gallop=True)
-        if k is not None:
-            while True:
-                basis = _finish(flat, shift, temporal[:, :k], coeffs[:k], size, tolerance, unit_weights)
-                if basis.max_error <= bound or k >= usable:
-                    return basis
-                k += 1  # rescaling the weights moved the error over the bound by rounding
+        kept = temporal.shape[1]
+        # the last few random directions are less accurate, unless the range finder caught every
+        # direction there is (full rank, or fewer components than it tried: the data's rank is lower)
+        usable = kept if rank >= T or kept < rank else max(1, kept - _OVERSAMPLE // 2)
+        # K found on a few frames is a lower bound for more frames: search coarse to fine, then confirm
+        # (and raise K where needed) on every frame with the stored arrays
+        k: int | None = 1
+        for i, rows in enumerate(subsets):
+            k = _smallest_k(flat[rows], shift, temporal[rows], coeffs, k, usable, bound, gallop=i > 0)
+            if k is None:
+                break
+        while k is not None:
+            basis = _finish(flat, shift, temporal[:, :k], coeffs[:k], size, tolerance, unit_weights)
+            if basis.max_error <= bound or (k >= usable and rank >= T):
+                return basis
+            k = k + 1 if k < usable else None
         if rank >= T:  # every component is in and the tolerance is still not met (float32 rounding)
             return _finish(flat, shift, temporal, coeffs, size, tolerance, unit_weights)
         rank = min(T, 2 * rank)
 
 
-def frame_basis(anim: Animation, tolerance: float | None = None) -> MorphBasis:
-    """One target per frame (each frame's offsets) and one-hot weights: exact at every frame."""
+def frame_basis(anim: Animation, tolerance: float | None = None, sparse: bool = False) -> MorphBasis:
+    """One target per frame (each frame's offsets) and one-hot weights: exact at every frame
+    (`sparse` only matters for storage: static vertices are exactly zero already)."""
     frames, template = _frames(anim)
     T = frames.shape[0]
     if T > MAX_FRAME_TARGETS:
@@ -190,6 +209,10 @@ def _principal_components(
     return np.ascontiguousarray(basis @ vectors), vectors.T @ small
 
 
+def _even_rows(T: int, n: int) -> np.ndarray:
+    return np.unique(np.linspace(0, T - 1, n).round().astype(np.int64))
+
+
 def _smallest_k(
     flat: np.ndarray, shift: np.ndarray, temporal: np.ndarray, coeffs: np.ndarray, low: int, high: int,
     bound: float, gallop: bool = False,
@@ -250,19 +273,36 @@ def _finish(
     )
 
 
+def _sparsify(basis: MorphBasis, flat: np.ndarray, shift: np.ndarray, budget: float) -> MorphBasis:
+    """Zero, per vertex, the smallest target entries whose lengths sum to at most `budget` (with every
+    |weight| <= 1 a dropped entry moves the vertex by at most its length), then measure the error."""
+    if budget > 0 and basis.k:
+        lengths = np.linalg.norm(basis.targets, axis=2)  # [K, V]
+        ranks = np.argsort(np.argsort(lengths, axis=0, kind="stable"), axis=0, kind="stable")
+        cumulative = np.cumsum(np.sort(lengths, axis=0), axis=0)
+        dropped = (cumulative <= budget).sum(axis=0)  # per vertex: how many of its smallest entries go
+        basis.targets[ranks < dropped[None, :]] = 0.0
+    rest = (shift + basis.rest.reshape(-1)).astype(np.float32)
+    basis.max_error = _max_error(flat, basis.weights, basis.targets.reshape(basis.k, -1), rest)
+    return basis
+
+
 def _max_error(flat: np.ndarray, weights: np.ndarray, targets: np.ndarray, rest: np.ndarray) -> float:
-    """max over frames and vertices of |flat - (rest + weights @ targets)| per vertex, in blocks."""
+    """max over frames and vertices of |flat - (rest + weights @ targets)| per vertex, in cache-sized tiles."""
     T, width = flat.shape
     weights = np.ascontiguousarray(weights, dtype=np.float32)
+    rows, cols = _TILE
+    buf = np.empty((min(rows, T), min(cols, width)), np.float32)
     worst = 0.0
-    buf = np.empty((T, min(_CHUNK, width)), np.float32)
-    for start in range(0, width, _CHUNK):
-        stop = min(start + _CHUNK, width)
-        block = buf[:, : stop - start]
-        np.matmul(weights, targets[:, start:stop], out=block)
-        block += rest[start:stop]
-        np.subtract(flat[:, start:stop], block, out=block)
-        np.square(block, out=block)
-        xyz = block.reshape(T, -1, 3)
-        worst = max(worst, float((xyz[:, :, 0] + xyz[:, :, 1] + xyz[:, :, 2]).max()))
+    for r0 in range(0, T, rows):
+        r1 = min(r0 + rows, T)
+        for c0 in range(0, width, cols):
+            c1 = min(c0 + cols, width)
+            block = buf[: r1 - r0, : c1 - c0]
+            np.matmul(weights[r0:r1], targets[:, c0:c1], out=block)
+            block += rest[c0:c1]
+            np.subtract(flat[r0:r1, c0:c1], block, out=block)
+            np.square(block, out=block)
+            xyz = block.reshape(r1 - r0, -1, 3)
+            worst = max(worst, float((xyz[:, :, 0] + xyz[:, :, 1] + xyz[:, :, 2]).max()))
     return float(np.sqrt(worst))

@@ -17,8 +17,9 @@ mesh's `points` hold the template only, with no time samples):
                               skel:blendShapeTargets (the BlendShape prims below, same order),
                               primvars:skel:jointIndices [0] / jointWeights [1] (constant, one influence),
                               primvars:skel:geomBindTransform identity
-    /Face/Mesh/<name>         BlendShape: offsets [V] (or fewer with pointIndices, when some vertices of
-                              the target do not move at all); `rest` is a target whose weight is 1 in
+    /Face/Mesh/<name>         BlendShape: offsets [V], or, when a quarter or more of the target's offsets
+                              are zero, pointIndices and the offsets of only those vertices (smaller:
+                              4 + 12 bytes per vertex instead of 12); `rest` is a target whose weight is 1 in
                               every frame (it holds the constant part the [0, 1] rescaling moved out of the
                               weights; absent when it is zero)
 
@@ -27,11 +28,13 @@ The reconstruction error goes in customLayerData["facegen"]["reconstruction"] (s
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from facegen.animation import Animation
 from facegen.errors import FacegenError
-from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, morph_basis
+from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, max_vertex_error, morph_basis
 
 SKELETON_PATH = "/Face/Skeleton"
 ANIMATION_PATH = "/Face/Skeleton/Animation"
@@ -40,10 +43,25 @@ REST_SHAPE = "rest"
 
 
 def basis_for(anim: Animation, morph_targets: int | str | None, tolerance: float | None) -> MorphBasis:
-    """The PCA basis the blendshapes are made of (weights in [0, 1]); see pca.morph_basis."""
-    return morph_basis(
-        anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance), unit_weights=True
+    """The PCA basis the blendshapes are made of: pca.morph_basis with weights in [0, 1] and sparse targets
+    (the same basis as glTF morph targets).
+
+    Vertices that never move in `anim` also get exactly zero offsets in every target and in `rest` (PCA
+    leaves float rounding there, and a fixed K has no error budget to drop it), so BlendShapes can leave
+    them out; the error is measured again then."""
+    basis = morph_basis(
+        anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance),
+        unit_weights=True, sparse=True,
     )
+    vertices = np.asarray(anim.vertices, dtype=np.float32)
+    moving = np.zeros(vertices.shape[1], bool)
+    for start in range(0, len(vertices), 256):  # in blocks: a [T, V, 3] boolean is large for long clips
+        moving |= np.any(vertices[start : start + 256] != np.asarray(anim.template, np.float32), axis=(0, 2))
+    if moving.all():
+        return basis
+    basis = replace(basis, targets=basis.targets * moving[None, :, None], rest=basis.rest * moving[:, None])
+    basis.max_error = max_vertex_error(anim, basis)
+    return basis
 
 
 def shapes(basis: MorphBasis) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -102,7 +120,7 @@ def author_skeleton(stage, mesh_path: str, names: list[str], offsets: np.ndarray
     for name, offset in zip(names, offsets, strict=True):
         shape = UsdSkel.BlendShape.Define(stage, Sdf.Path(mesh_path).AppendChild(name))
         moving = np.flatnonzero(np.any(offset != 0, axis=1))
-        if len(moving) < len(offset):  # only the vertices this target moves (exact: the rest are zero)
+        if 16 * len(moving) < 12 * len(offset):  # index + offset of the vertices it moves is smaller
             shape.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(moving.astype(np.int32)))
             offset = offset[moving]
         shape.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(offset, dtype=np.float32)))

@@ -26,9 +26,8 @@ _INITIALIZE_PHONEME_EVENTS = 0x0001
 _INITIALIZE_DONT_EXIT = 0x8000
 _POS_CHARACTER = 1
 _CHARS_UTF8 = 1
-_EVENT_LIST_TERMINATED, _EVENT_WORD, _EVENT_END, _EVENT_MSG_TERMINATED, _EVENT_PHONEME = 0, 1, 5, 6, 7
+_EVENT_LIST_TERMINATED, _EVENT_WORD, _EVENT_PHONEME = 0, 1, 7
 _PARAM_RATE, _PARAM_PITCH = 1, 3
-_PAUSES = {"_", "_:", "_!", "_|", "_^_", "_X1", "_!_"}
 
 
 class _EventId(ctypes.Union):
@@ -122,7 +121,7 @@ class _Espeak:
         i = 0
         while events[i].type != _EVENT_LIST_TERMINATED:
             ev = events[i]
-            if ev.type in (_EVENT_WORD, _EVENT_PHONEME, _EVENT_END, _EVENT_MSG_TERMINATED):
+            if ev.type in (_EVENT_WORD, _EVENT_PHONEME):
                 name = ev.id.string.decode("ascii", "replace") if ev.type == _EVENT_PHONEME else ""
                 self.events.append((ev.type, ev.sample, ev.text_position, name))
             i += 1
@@ -175,7 +174,7 @@ def synthesize(text: str, voice: str = "en-us", pitch: int = 50, rate: int = 170
         es.set_voice(name)
         es.lib.espeak_SetParameter(_PARAM_RATE, rate, 0)
         es.lib.espeak_SetParameter(_PARAM_PITCH, pitch, 0)
-        es.lib.espeak_ng_SetRandSeed(0)
+        es.lib.espeak_ng_SetRandSeed(0)  # for the voices with noise (klatt, whisper)
         es.chunks, es.events = [], []
         data = text.encode("utf-8")
         status = es.lib.espeak_Synth(data, len(data) + 1, 0, _POS_CHARACTER, 0, _CHARS_UTF8, None, None)

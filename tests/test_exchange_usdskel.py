@@ -1,0 +1,343 @@
+"""USD blendshapes mode (facegen.exchange.usd_skel): UsdSkel layout, UsdSkel's own evaluation vs the source,
+the stated reconstruction error, read-back, validation, atomic writes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdMedia, UsdSkel, Vt
+from test_exchange_usd import FPS, SR, _Boom, make_animation
+
+from facegen import __version__
+from facegen.animation import Animation
+from facegen.errors import FacegenError
+from facegen.exchange import read_animation, write_animation
+from facegen.exchange.pca import DEFAULT_TOLERANCE, MAX_FRAME_TARGETS
+from facegen.exchange.usd import DEFAULT_METERS_PER_UNIT
+from facegen.mesh import Mesh
+from facegen.validate import validate
+
+FRAMES = 60
+WEIGHTS = Sdf.Path("/Face/Skeleton/Animation.blendShapeWeights")
+
+
+def static_vertices(mesh: Mesh) -> np.ndarray:
+    """The indices of the vertices rich_animation never moves: the top 35% by height."""
+    return np.flatnonzero(mesh.vertices[:, 1] > np.quantile(mesh.vertices[:, 1], 0.65))
+
+
+def rich_animation(mesh: Mesh, frames: int = FRAMES, fps: float = FPS) -> Animation:
+    """Six smooth spatial fields driven by curves of different frequencies, plus a nonlinear "jaw"
+    rotation of the lower half (so PCA needs several targets); the top three grid rows never move (so
+    targets are sparse there); 220 Hz tone as long as the clip."""
+    v = mesh.vertices.astype(np.float64)
+    t = np.arange(frames)[:, None] / fps
+    rng = np.random.default_rng(7)
+    centres = v[rng.choice(len(v), 6, replace=False)]
+    fields = np.stack([
+        np.exp(-((v - c) ** 2).sum(1) / (2 * (0.15 * mesh.size) ** 2))[:, None] * rng.standard_normal(3)
+        for c in centres
+    ])  # [6, V, 3]
+    curves = np.sin(2 * np.pi * np.array([0.7, 1.3, 2.1, 2.9, 3.7, 4.3]) * t + rng.uniform(0, 6, 6))
+    offsets = 0.01 * mesh.size * np.einsum("tc,cvk->tvk", curves, fields)
+    angle = 0.2 * (0.5 + 0.5 * np.sin(2 * np.pi * 1.1 * t[:, 0]))  # [T]
+    low = v[:, 1] < np.median(v[:, 1])
+    y, z = v[low, 1] - v[:, 1].max(), v[low, 2]
+    offsets[:, low, 1] += y * (np.cos(angle)[:, None] - 1) - z * np.sin(angle)[:, None]
+    offsets[:, low, 2] += y * np.sin(angle)[:, None] + z * (np.cos(angle)[:, None] - 1)
+    offsets[:, static_vertices(mesh)] = 0.0
+    n = round(frames / fps * SR)
+    return Animation(
+        vertices=(v[None] + offsets).astype(np.float32),
+        faces=mesh.faces,
+        fps=fps,
+        template=mesh.vertices,
+        audio=(0.5 * np.sin(2 * np.pi * 220.0 * np.arange(n) / SR)).astype(np.float32),
+        sample_rate=SR,
+        metadata={"model": "unit-test.safetensors", "speaker": "F2"},
+    )
+
+
+def max_distance(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2).sum(-1)).max())
+
+
+def usdskel_points(stage: Usd.Stage, time: float) -> np.ndarray:
+    """Evaluate /Face/Mesh at `time` with UsdSkel alone (Cache, SkinningQuery, BlendShapeQuery)."""
+    mesh = stage.GetPrimAtPath("/Face/Mesh")
+    cache = UsdSkel.Cache()
+    assert cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
+    skinning = cache.GetSkinningQuery(mesh)
+    skeleton = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skeleton")))
+    assert skinning and skeleton and skinning.HasBlendShapes()
+    weights = skinning.GetBlendShapeMapper().Remap(skeleton.GetAnimQuery().ComputeBlendShapeWeights(time))
+    shapes = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(mesh))
+    sub_weights, shape_indices, sub_indices = shapes.ComputeSubShapeWeights(weights)
+    points = UsdGeom.Mesh(mesh).GetPointsAttr().Get(time)
+    assert shapes.ComputeDeformedPoints(sub_weights, shape_indices, sub_indices,
+                                        shapes.ComputeBlendShapePointIndices(),
+                                        shapes.ComputeSubShapePointOffsets(), points)
+    assert skinning.ComputeSkinnedPoints(skeleton.ComputeSkinningTransforms(time), points, time)
+    return np.asarray(points, dtype=np.float32)
+
+
+def test_blendshapes_layout(tmp_path, grid_mesh):
+    anim = rich_animation(grid_mesh)
+    out = tmp_path / "clip.usda"
+    assert write_animation(anim, out, mode="blendshapes") == [out, tmp_path / "clip.wav"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.usda", "clip.wav"]  # no temp files
+    stage = Usd.Stage.Open(str(out))
+    layer = stage.GetRootLayer()
+
+    # stage metadata as points mode
+    assert stage.GetTimeCodesPerSecond() == FPS and stage.GetFramesPerSecond() == FPS
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0.0, FRAMES - 1.0)
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(DEFAULT_METERS_PER_UNIT)
+    root = stage.GetDefaultPrim()
+    assert root.GetPath() == Sdf.Path("/Face") and root.IsA(UsdSkel.Root)
+    assert Usd.ModelAPI(root).GetKind() == "component"
+
+    # the skeleton: one root joint, identity bind/rest, its animation source
+    skeleton = UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skeleton"))
+    assert list(skeleton.GetJointsAttr().Get()) == ["root"]
+    assert list(skeleton.GetBindTransformsAttr().Get()) == [Gf.Matrix4d(1)]
+    assert list(skeleton.GetRestTransformsAttr().Get()) == [Gf.Matrix4d(1)]
+    assert skeleton.GetPrim().HasAPI(UsdSkel.BindingAPI)
+    source = UsdSkel.BindingAPI(skeleton.GetPrim()).GetAnimationSourceRel().GetTargets()
+    assert source == [Sdf.Path("/Face/Skeleton/Animation")]
+
+    # the mesh: template points (no samples), bound to the skeleton and its blend shapes
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
+    assert mesh.GetPointsAttr().GetNumTimeSamples() == 0
+    np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get()), grid_mesh.vertices)
+    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), grid_mesh.faces)
+    binding = UsdSkel.BindingAPI(mesh.GetPrim())
+    assert mesh.GetPrim().HasAPI(UsdSkel.BindingAPI)
+    assert binding.GetSkeletonRel().GetTargets() == [Sdf.Path("/Face/Skeleton")]
+    names = list(binding.GetBlendShapesAttr().Get())
+    assert binding.GetBlendShapeTargetsRel().GetTargets() == [Sdf.Path(f"/Face/Mesh/{n}") for n in names]
+    indices, weights = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
+    assert list(indices.Get()) == [0] and list(weights.Get()) == [1.0]
+    assert indices.GetInterpolation() == weights.GetInterpolation() == UsdGeom.Tokens.constant
+    assert indices.GetElementSize() == weights.GetElementSize() == 1
+    assert binding.GetGeomBindTransformAttr().Get() == Gf.Matrix4d(1)
+
+    # PCA targets plus the constant `rest` target; the static rows are left out of every target
+    assert names[-1] == "rest" and all(n.startswith("pca_") for n in names[:-1]) and len(names) >= 4
+    static = static_vertices(grid_mesh)
+    assert len(static) == 36  # the top three rows of the grid
+    for name in names:
+        shape = UsdSkel.BlendShape(stage.GetPrimAtPath(f"/Face/Mesh/{name}"))
+        point_indices = np.asarray(shape.GetPointIndicesAttr().Get())
+        assert 0 < len(point_indices) <= grid_mesh.num_vertices - len(static)
+        assert not np.isin(static, point_indices).any()
+        assert (np.diff(point_indices) > 0).all()
+        offsets = np.asarray(shape.GetOffsetsAttr().Get())
+        assert len(offsets) == len(point_indices) and (np.abs(offsets).max(1) > 0).all()
+
+    # the animation: the same names, one weight sample per frame at 0..T-1, weights in [0, 1], rest = 1
+    animation = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation"))
+    assert list(animation.GetBlendShapesAttr().Get()) == names
+    attr = animation.GetBlendShapeWeightsAttr()
+    assert list(attr.GetTimeSamples()) == [float(i) for i in range(FRAMES)]
+    samples = np.stack([np.asarray(attr.Get(t)) for t in attr.GetTimeSamples()])
+    assert samples.shape == (FRAMES, len(names)) and samples.dtype == np.float32
+    assert samples.min() >= 0.0 and samples.max() <= 1.0
+    np.testing.assert_array_equal(samples[:, -1], 1.0)
+    assert (samples[:, :-1].min(0) == 0).all() and (samples[:, :-1].max(0) == 1).all()  # each curve spans 0..1
+
+    # audio as in points mode
+    sound = UsdMedia.SpatialAudio(stage.GetPrimAtPath("/Face/Audio"))
+    assert sound.GetFilePathAttr().Get().path == "./clip.wav"
+    assert sound.GetPlaybackModeAttr().Get() == UsdMedia.Tokens.onceFromStart
+
+    # the stated reconstruction error: within the default tolerance of the face size
+    data = layer.customLayerData["facegen"]
+    assert data["mode"] == "blendshapes" and data["version"] == __version__ and data["frames"] == FRAMES
+    info = data["reconstruction"]
+    assert info["targets"] == len(names) and info["tolerance"] == DEFAULT_TOLERANCE
+    assert info["size"] == pytest.approx(grid_mesh.size)
+    assert 0 < info["max_error"] <= DEFAULT_TOLERANCE * grid_mesh.size
+    assert info["relative_error"] == pytest.approx(info["max_error"] / grid_mesh.size)
+
+
+@pytest.mark.parametrize("ext", [".usda", ".usdc"])
+def test_usdskel_evaluation_equals_the_source(tmp_path, grid_mesh, ext):
+    anim = rich_animation(grid_mesh)
+    out = tmp_path / f"clip{ext}"
+    write_animation(anim, out, mode="blendshapes")
+    stage = Usd.Stage.Open(str(out))
+    stated = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]["max_error"]
+    bound = DEFAULT_TOLERANCE * grid_mesh.size
+    rounding = 1e-6 * grid_mesh.size  # float32 sums in a different order than the writer's measurement
+    errors = []
+    for frame in (0, FRAMES // 2, FRAMES - 1):
+        points = usdskel_points(stage, float(frame))
+        errors.append(max_distance(points, anim.vertices[frame]))
+    assert max(errors) <= stated + rounding and max(errors) <= bound + rounding
+    assert max(errors) > 0  # a real approximation: K < T
+
+    # facegen's reader blends the same shapes: equal to UsdSkel's evaluation and to the source
+    back = read_animation(out)
+    assert back.vertices.shape == anim.vertices.shape and back.fps == FPS
+    assert max_distance(back.vertices[FRAMES // 2], usdskel_points(stage, FRAMES // 2)) <= rounding
+    assert max_distance(back.vertices, anim.vertices) <= stated + rounding
+    np.testing.assert_array_equal(back.template, grid_mesh.vertices)
+    np.testing.assert_array_equal(back.faces, grid_mesh.faces)
+    assert back.metadata["speaker"] == "F2"
+    np.testing.assert_allclose(back.audio, anim.audio, atol=1.0 / 32767)
+
+
+def test_tolerance_sets_the_number_of_targets(tmp_path, grid_mesh):
+    anim = rich_animation(grid_mesh)
+    counts = []
+    for tolerance in (3e-2, 3e-3, 1e-4):
+        out = tmp_path / f"t{tolerance:g}.usdc"
+        write_animation(anim, out, mode="blendshapes", tolerance=tolerance)
+        stage = Usd.Stage.Open(str(out))
+        info = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]
+        assert info["tolerance"] == tolerance and info["relative_error"] <= tolerance
+        evaluated = usdskel_points(stage, 31.0)
+        assert max_distance(evaluated, anim.vertices[31]) <= (tolerance + 1e-6) * grid_mesh.size
+        counts.append(info["targets"])
+    assert counts[0] < counts[1] < counts[2], counts
+
+
+def test_fixed_and_per_frame_targets(tmp_path, grid_mesh):
+    anim = rich_animation(grid_mesh, frames=20)
+    write_animation(anim, tmp_path / "k3.usdc", mode="blendshapes", morph_targets=3)
+    stage = Usd.Stage.Open(str(tmp_path / "k3.usdc"))
+    info = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]
+    assert "tolerance" not in info and info["targets"] == 4  # 3 PCA targets + rest
+    names = list(UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation")).GetBlendShapesAttr().Get())
+    assert names == ["pca_000", "pca_001", "pca_002", "rest"]
+    assert max_distance(usdskel_points(stage, 10.0), anim.vertices[10]) <= info["max_error"] + 1e-6 * grid_mesh.size
+
+    # "all": one target per frame, one-hot weights, no rest target, exact
+    write_animation(anim, tmp_path / "all.usdc", mode="blendshapes", morph_targets="all")
+    stage = Usd.Stage.Open(str(tmp_path / "all.usdc"))
+    attr = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation")).GetBlendShapeWeightsAttr()
+    np.testing.assert_array_equal(np.stack([np.asarray(attr.Get(t)) for t in range(20)]), np.eye(20))
+    assert stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]["targets"] == 20
+    assert max_distance(usdskel_points(stage, 7.0), anim.vertices[7]) <= 1e-6 * grid_mesh.size
+
+    long = rich_animation(grid_mesh, frames=MAX_FRAME_TARGETS + 1)
+    with pytest.raises(FacegenError, match="--morph-targets"):
+        write_animation(long, tmp_path / "long.usdc", mode="blendshapes", morph_targets="all")
+    assert not (tmp_path / "long.usdc").exists() and not (tmp_path / "long.wav").exists()
+
+
+def test_options_are_checked(tmp_path, grid_mesh):
+    anim = make_animation(grid_mesh, frames=5)
+    with pytest.raises(FacegenError, match="blendshapes only"):
+        write_animation(anim, tmp_path / "x.usdc", morph_targets=4)
+    with pytest.raises(FacegenError, match="tolerance apply to USD blendshapes only"):
+        write_animation(anim, tmp_path / "x.usdc", mode="points", tolerance=1e-3)
+    with pytest.raises(FacegenError, match="points, blendshapes"):
+        write_animation(anim, tmp_path / "x.usdc", mode="skinned")
+    with pytest.raises(FacegenError, match="mode"):
+        write_animation(anim, tmp_path / "x.npy", mode="blendshapes")
+    with pytest.raises(FacegenError, match="positive"):
+        write_animation(anim, tmp_path / "x.usdc", mode="blendshapes", tolerance=0)
+    with pytest.raises(FacegenError, match="whole number"):
+        write_animation(anim, tmp_path / "x.usdc", mode="blendshapes", morph_targets=0)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("disk on fire"), KeyboardInterrupt()])
+def test_failed_write_leaves_nothing(tmp_path, grid_mesh, exc):
+    anim = rich_animation(grid_mesh, frames=10)
+    anim.metadata = {_Boom(exc): 1}
+    with pytest.raises(type(exc)):
+        write_animation(anim, tmp_path / "out.usdc", mode="blendshapes")
+    assert list(tmp_path.iterdir()) == []
+    # a previous file at the same path is kept as it was
+    write_animation(rich_animation(grid_mesh, frames=10), tmp_path / "out.usdc", mode="blendshapes")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    with pytest.raises(type(exc)):
+        write_animation(anim, tmp_path / "out.usdc", mode="blendshapes")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_validate_blendshapes(tmp_path, grid_mesh):
+    out = tmp_path / "ok.usda"
+    write_animation(rich_animation(grid_mesh), out, mode="blendshapes")
+    report = validate(out, template=grid_mesh, fps=FPS)
+    assert report.ok and report.warnings == [], report.to_text()
+    for name in ("blendshapes", "reconstruction", "vertex count", "faces", "frame rate", "time samples",
+                 "finite", "displacement", "audio", "audio duration", "usd validators"):
+        assert report.check(name) is not None and report.check(name).ok, name
+    assert report.check("time samples").detail == f"{FRAMES} frames, one at each of 0..{FRAMES - 1}"
+    assert "blend shapes + 'rest'" in report.check("blendshapes").detail
+    assert "120 vertices per frame" in report.check("vertex count").detail
+
+    def broken(name: str, edit) -> set[str]:
+        copy = tmp_path / f"{name}.usda"
+        copy.write_bytes(out.read_bytes())
+        (tmp_path / f"{name}.wav").write_bytes((tmp_path / "ok.wav").read_bytes())
+        stage = Usd.Stage.Open(str(copy))
+        edit(stage)
+        stage.GetRootLayer().Save()
+        report = validate(copy, template=grid_mesh)
+        return {c.name for c in report.failures}
+
+    first = Sdf.Path("/Face/Mesh/pca_000.offsets")
+
+    def nan_offset(stage):
+        offsets = np.asarray(stage.GetAttributeAtPath(first).Get()).copy()
+        offsets[3, 1] = np.nan
+        stage.GetAttributeAtPath(first).Set(Vt.Vec3fArray.FromNumpy(offsets))
+
+    def huge_offset(stage):
+        offsets = np.asarray(stage.GetAttributeAtPath(first).Get()).copy()
+        offsets[3] = [0.0, 0.0, 2.0 * grid_mesh.size]
+        stage.GetAttributeAtPath(first).Set(Vt.Vec3fArray.FromNumpy(offsets))
+
+    def drop_sample(stage):
+        stage.GetAttributeAtPath(WEIGHTS).ClearAtTime(17.0)
+
+    def short_sample(stage):
+        stage.GetAttributeAtPath(WEIGHTS).Set(Vt.FloatArray([0.5]), 4.0)
+
+    def short_offsets(stage):
+        shape = UsdSkel.BlendShape(stage.GetPrimAtPath("/Face/Mesh/pca_001"))
+        shape.GetPointIndicesAttr().Clear()
+        shape.GetOffsetsAttr().Set(Vt.Vec3fArray.FromNumpy(np.zeros((7, 3), np.float32)))
+
+    def over_tolerance(stage):
+        data = stage.GetRootLayer().customLayerData
+        data["facegen"]["reconstruction"]["relative_error"] = 0.5
+        stage.GetRootLayer().customLayerData = data
+
+    assert broken("nan", nan_offset) == {"finite"}
+    assert broken("huge", huge_offset) == {"displacement"}
+    assert broken("gap", drop_sample) == {"time samples"}  # 59 frames: still within a frame of the audio
+    cascade = {"blendshapes", "vertex count", "finite", "audio duration"}  # no frames to check at all
+    assert broken("short", short_sample) == cascade
+    assert "time 4 has a different count" in validate(tmp_path / "short.usda").check("blendshapes").detail
+    assert broken("offsets", short_offsets) == cascade
+    assert "7 offsets for a mesh of 120 points" in validate(tmp_path / "offsets.usda").check("blendshapes").detail
+    assert broken("over", over_tolerance) == {"reconstruction"}
+    assert "blendShapeWeights sampled at 0, 1, 2, 3, ..." in validate(tmp_path / "gap.usda").check("time samples").detail
+
+
+def test_biwi_blendshapes(tmp_path, biwi_template):
+    anim = rich_animation(biwi_template, frames=50)
+    write_animation(anim, tmp_path / "biwi.usdc")
+    written = write_animation(anim, tmp_path / "biwi_bs.usdc", mode="blendshapes")
+    assert written == [tmp_path / "biwi_bs.usdc", tmp_path / "biwi_bs.wav"]
+    stage = Usd.Stage.Open(str(tmp_path / "biwi_bs.usdc"))
+    info = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]
+    bound = DEFAULT_TOLERANCE * biwi_template.size
+    assert info["max_error"] <= bound and info["size"] == pytest.approx(biwi_template.size)
+    evaluated = usdskel_points(stage, 25.0)
+    assert evaluated.shape == (23370, 3)
+    assert max_distance(evaluated, anim.vertices[25]) <= info["max_error"] + 1e-6 * biwi_template.size
+    # much smaller than one points sample per frame
+    assert (tmp_path / "biwi_bs.usdc").stat().st_size < 0.5 * (tmp_path / "biwi.usdc").stat().st_size
+    report = validate(tmp_path / "biwi_bs.usdc", template=biwi_template, fps=FPS)
+    assert report.ok and report.warnings == [], report.to_text()
+    assert report.check("vertex count").detail.startswith("23370 vertices per frame")
+    back = read_animation(tmp_path / "biwi_bs.usdc", template=biwi_template)
+    assert max_distance(back.vertices, anim.vertices) <= info["max_error"] + 1e-6 * biwi_template.size
