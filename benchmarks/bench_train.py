@@ -31,7 +31,8 @@ from facegen.train import _Batch, _torch_settings, epoch_order, train_epoch
 BIWI_VERTICES = 23370
 
 
-def make_items(folder: Path, sequences: int, vertices: int, text_dim: int, files: int, seed: int) -> list[Item]:
+def make_items(folder: Path, sequences: int, vertices: int, text_dim: int, files: int,
+               seed: int) -> list[Item]:
     rng = np.random.default_rng(seed)
     lengths = rng.integers(90, 146, size=sequences)
     template = rng.normal(0, 0.05, size=(vertices, 3)).astype(np.float32)

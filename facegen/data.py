@@ -152,7 +152,8 @@ class Splits:
 
     def to_dict(self) -> dict:
         return {"train_subjects": list(self.train_subjects), "test_subjects": list(self.test_subjects),
-                "train_sentences": _ranges(self.train_sentences), "val_sentences": _ranges(self.val_sentences),
+                "train_sentences": _ranges(self.train_sentences),
+                "val_sentences": _ranges(self.val_sentences),
                 "test_sentences": _ranges(self.test_sentences)}
 
     @classmethod
@@ -374,7 +375,7 @@ class Dataset:
 
     @cached_property
     def regions(self) -> dict[str, np.ndarray]:
-        """Vertex regions from ROOT/regions/*.txt: lve.txt → "lips", fdd.txt → "upper_face", others by name."""
+        """Regions from ROOT/regions/*.txt: lve.txt → "lips", fdd.txt → "upper_face", others by name."""
         out: dict[str, np.ndarray] = {}
         folder = self.root / "regions"
         if folder.is_dir():
@@ -419,15 +420,16 @@ class Dataset:
                 if path.suffix.lower() in ALIGNMENT_SUFFIXES:
                     alignment = path
                     break
-        return Sequence(name, subject, self.root / "wav" / f"{name}.wav",
-                        self.root / "vertices_npy" / f"{name}.npy", text if text.is_file() else None, alignment)
+        wav, npy = self.root / "wav" / f"{name}.wav", self.root / "vertices_npy" / f"{name}.npy"
+        return Sequence(name, subject, wav, npy, text if text.is_file() else None, alignment)
 
     def sequences(self, names: Iterable[str]) -> list[Sequence]:
         """The sequences whose wav and npy files exist (others reported as bad)."""
         out = []
         for name in names:
             seq = self.sequence(name)
-            missing = [p.relative_to(self.root).as_posix() for p in (seq.wav, seq.vertices) if not p.is_file()]
+            missing = [p.relative_to(self.root).as_posix() for p in (seq.wav, seq.vertices)
+                       if not p.is_file()]
             if missing:
                 self.bad(name, f"{' and '.join(missing)} missing")
                 continue
@@ -490,7 +492,8 @@ class Dataset:
             raise _BadSequence(f"no transcript text/{seq.name}.txt or alignment alignments/{seq.name}.json "
                                "for the text modality")
         transcript = seq.text.read_text(encoding="utf-8", errors="replace")
-        cached = self.cache_dir / "alignments" / f"{seq.name}-{_digest([_stat(seq.wav), _stat(seq.text)])}.json"
+        key = _digest([_stat(seq.wav), _stat(seq.text)])
+        cached = self.cache_dir / "alignments" / f"{seq.name}-{key}.json"
         if cached.is_file():
             return align.read_alignment(cached, duration=duration)
         if not transcript.strip():
@@ -562,7 +565,8 @@ class FeatureCache:
         self.config = features
         self.filters = np.ascontiguousarray(filters, np.float32)
         self.backend = backend
-        self._mel_key = [CACHE_VERSION, features.to_dict(), hashlib.sha256(self.filters.tobytes()).hexdigest()]
+        filters_hash = hashlib.sha256(self.filters.tobytes()).hexdigest()
+        self._mel_key = [CACHE_VERSION, features.to_dict(), filters_hash]
 
     def _get(self, path: Path) -> np.ndarray | None:
         from safetensors.numpy import load_file
@@ -607,7 +611,8 @@ class FeatureCache:
                 raise _BadSequence(f"no word timings ({exc})") from exc
             words_json = [[w.text, float(w.start), float(w.end)] for w in words]
             _write_json(words_path, {"words": words_json})
-        text_key = [CACHE_VERSION, self.backend.id, self.backend.dim, self.config.fps, mel.shape[0], words_json]
+        text_key = [CACHE_VERSION, self.backend.id, self.backend.dim, self.config.fps, mel.shape[0],
+                    words_json]
         text_path = self.folder / f"{seq.name}.text-{_digest(text_key)}.safetensors"
         text = self._get(text_path)
         if text is None:
@@ -648,7 +653,7 @@ class DatasetWriter:
                                "choose a writable place") from exc
 
     def write_mesh(self, mesh: Mesh) -> None:
-        """BIWI.ply, and its regions: lips → regions/lve.txt, upper_face → regions/fdd.txt, others by name."""
+        """BIWI.ply and its regions (lips → regions/lve.txt, upper_face → regions/fdd.txt, others by name)."""
         from facegen.mesh import write_mesh
 
         with atomic_path(self.root / "BIWI.ply") as tmp:
@@ -697,7 +702,9 @@ class DatasetWriter:
 
 
 # ---------------------------------------------------------------------------------- raw BIWI import
-ROTATE_X_PI = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(np.pi), -np.sin(np.pi)], [0.0, np.sin(np.pi), np.cos(np.pi)]])
+ROTATE_X_PI = np.array([[1.0, 0.0, 0.0],  # the community's rotx for theta = pi (applied as V @ rotx)
+                        [0.0, np.cos(np.pi), -np.sin(np.pi)],
+                        [0.0, np.sin(np.pi), np.cos(np.pi)]])
 NORMALISATIONS = ("frame", "template")
 _SUBJECT = re.compile(r"^([FM]\d+)(?=$|[_\-. ])", re.IGNORECASE)
 _ARCHIVE = re.compile(r"\.(tar|tgz|tar\.gz)$", re.IGNORECASE)
@@ -748,7 +755,8 @@ def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(0.5 * np.linalg.norm(np.cross(e1, e2), axis=1).sum())
 
 
-def normalise(vertices: np.ndarray, faces: np.ndarray, reference: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+def normalise(vertices: np.ndarray, faces: np.ndarray,
+              reference: tuple[np.ndarray, float] | None = None) -> np.ndarray:
     """The community's BIWI normalisation of one mesh: rotate π about x, centre, scale to unit area.
 
     As CodeTalker's creatDataset_BIWI.m / process_BIWI_template.m: V ← V·Rx(π) (row vectors), then
@@ -797,7 +805,8 @@ def _vl_frames(source: Path) -> list[tuple[str, bytes]] | None:
     """(member name, bytes) of every .vl frame in a folder or tar archive, in frame order; None if none."""
     frames: list[tuple[str, bytes]] = []
     if source.is_dir():
-        frames = [(p.name, p.read_bytes()) for p in source.rglob("*") if p.suffix.lower() == ".vl" and p.is_file()]
+        frames = [(p.name, p.read_bytes()) for p in source.rglob("*")
+                  if p.suffix.lower() == ".vl" and p.is_file()]
     else:
         try:
             with tarfile.open(source, "r:*") as tar:
@@ -847,8 +856,8 @@ def _extract_audio(video: Path, wav: Path, sample_rate: int) -> None:
 
     ffmpeg = imageio_ffmpeg.get_ffmpeg_exe()
     with atomic_path(wav) as tmp:
-        cmd = [ffmpeg, "-nostdin", "-v", "error", "-y", "-i", str(video), "-vn", "-ac", "1", "-ar", str(sample_rate),
-               "-acodec", "pcm_s16le", "-f", "wav", str(tmp)]
+        cmd = [ffmpeg, "-nostdin", "-v", "error", "-y", "-i", str(video), "-vn", "-ac", "1",
+               "-ar", str(sample_rate), "-acodec", "pcm_s16le", "-f", "wav", str(tmp)]
         done = subprocess.run(cmd, check=False, capture_output=True, text=True)
         if done.returncode != 0 or not tmp.is_file():
             msg = (done.stderr.strip().splitlines() or ["no audio stream"])[-1]
@@ -895,7 +904,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
     raw, out = Path(raw), Path(out)
     warn = warn or (lambda _msg: None)
     if normalisation not in NORMALISATIONS:
-        raise FacegenError(f"unknown normalisation {normalisation!r}: choose one of {', '.join(NORMALISATIONS)}")
+        raise FacegenError(f"unknown normalisation {normalisation!r}: choose one of "
+                           f"{', '.join(NORMALISATIONS)}")
     for sub in ("rigid_scans", "faces"):
         if not (raw / sub).is_dir():
             raise FacegenError(f"{raw} has no {sub}/ folder: pass the folder of the raw BIWI release "
@@ -912,7 +922,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
         if m and (wanted is None or m.group(1).upper() in wanted):
             meshes.setdefault(m.group(1).upper(), read_obj(path))
     if not meshes:
-        raise FacegenError(f"no subject templates (F1.obj, M1.obj, …) in {raw}/rigid_scans: check the folder")
+        raise FacegenError(f"no subject templates (F1.obj, M1.obj, …) in {raw}/rigid_scans: "
+                           "check the folder")
     first = next(iter(meshes.values()))
     for subject, mesh in meshes.items():
         if mesh.num_vertices != first.num_vertices or not np.array_equal(mesh.faces, first.faces):
@@ -937,10 +948,12 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
                 raise FacegenError(f"{src} is missing: pass the folder with lve.txt and fdd.txt as --regions")
             idx = read_region(src)
             if idx.size and (idx.min() < 0 or idx.max() >= first.num_vertices):
-                raise FacegenError(f"{src} has vertex indices beyond the {first.num_vertices} vertices of the mesh")
+                raise FacegenError(f"{src} has vertex indices outside the {first.num_vertices} vertices "
+                                   "of the mesh: pass the region files of this topology")
             writer.write_regions({region: idx})
     else:
-        warn("no --regions given: copy lve.txt and fdd.txt into regions/ before evaluating (LVE and FDD need them)")
+        warn("no --regions given: copy lve.txt and fdd.txt into regions/ before evaluating "
+             "(LVE and FDD need them)")
 
     videos = _find_videos(raw)
     takes: list[tuple[str, int, list[Path]]] = []
@@ -963,11 +976,11 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
                 continue
             by_take.setdefault(number, []).append(entry)
         for number, entries in sorted(by_take.items()):
-            order = {"dir": 0, "tar": 1}
-            entries.sort(key=lambda e: order["dir"] if e.is_dir() else order["tar"] if e.suffix.lower() == ".tar" else 2)
+            entries.sort(key=lambda e: 0 if e.is_dir() else 1 if e.suffix.lower() == ".tar" else 2)
             takes.append((subject, number, entries))
 
-    for subject, number, entries in tqdm(takes, desc="import", unit="seq", disable=not progress, file=sys.stderr):
+    bar = tqdm(takes, desc="import", unit="seq", disable=not progress, file=sys.stderr)
+    for subject, number, entries in bar:
         name = sequence_name(subject, number)
         try:
             frames = None
@@ -985,7 +998,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
             for t, (member, data) in enumerate(frames):
                 v = read_vl(data, f"{member} of {name}")
                 if v.shape[0] != first.num_vertices:
-                    raise FacegenError(f"{member} has {v.shape[0]} vertices, the template {first.num_vertices}")
+                    raise FacegenError(f"{member} has {v.shape[0]} vertices, the template "
+                                       f"{first.num_vertices}")
                 motion[t] = normalise(v, faces, ref).reshape(-1)
             if video.suffix.lower() == ".wav":
                 import shutil

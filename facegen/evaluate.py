@@ -39,7 +39,8 @@ from facegen.errors import FacegenError
 METRICS = ("lve", "fdd", "mean_error", "upper_error", "lower_error", "lip_error")
 UNITS = {
     "lve": "squared mesh units (mean over frames of the max over lip vertices of the squared L2 error)",
-    "fdd": "squared mesh units (upper face: std over time of the squared displacement norm, truth - prediction)",
+    "fdd": "squared mesh units (upper face: std over time of the squared displacement norm, "
+           "truth - prediction)",
     "mean_error": "mesh units (mean L2 distance per vertex, all vertices)",
     "upper_error": "mesh units (mean L2 distance per vertex, upper-face region fdd.txt)",
     "lower_error": "mesh units (mean L2 distance per vertex, all vertices outside the upper-face region)",
@@ -58,7 +59,8 @@ def sequence_metrics(pred: np.ndarray, gt: np.ndarray, template: np.ndarray, lip
     gt = np.asarray(gt, np.float64)
     template = np.asarray(template, np.float64)
     if pred.shape != gt.shape or pred.ndim != 3 or gt.shape[1:] != template.shape:
-        raise ValueError(f"shapes differ: prediction {pred.shape}, truth {gt.shape}, template {template.shape}")
+        raise ValueError(f"shapes differ: prediction {pred.shape}, truth {gt.shape}, "
+                         f"template {template.shape}")
     err2 = np.square(pred - gt).sum(axis=2)  # [T, V] squared L2 error per vertex
     lve_frames = err2[:, lips].max(axis=1)
     motion_gt = np.square(gt[:, upper] - template[upper]).sum(axis=2)  # [T, U] squared displacement norms
@@ -143,17 +145,19 @@ def evaluate(
 
         backend = load_text_backend(bundle.text_backend, text_model_path)
         if backend.dim != cfg.text_dim:
-            raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was trained "
-                               f"on {cfg.text_dim}-d ({bundle.text_backend}): pass the matching --text-model")
+            raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was "
+                               f"trained on {cfg.text_dim}-d ({bundle.text_backend}): pass the matching "
+                               "--text-model")
     sequences = dataset.split(split, splits)
     if split != "test-b":
         strangers = sorted({s.subject for s in sequences} - set(bundle.speakers))
         if strangers:
-            raise FacegenError(f"subjects {' '.join(strangers)} of split {split} are not speakers of the model "
-                               f"({', '.join(bundle.speakers)}): evaluate them as test-b")
+            raise FacegenError(f"subjects {' '.join(strangers)} of split {split} are not speakers of the "
+                               f"model ({', '.join(bundle.speakers)}): evaluate them as test-b")
     items = dataset.load(sequences, bundle.features, bundle.mel_filters, backend, progress=not quiet)
     if not items:
-        raise FacegenError(f"no usable sequence of split {split} in {dataset.root}: check the files named above")
+        raise FacegenError(f"no usable sequence of split {split} in {dataset.root}: check the files named "
+                           "above")
     num_vertices = bundle.template.num_vertices
     if items[0].template.shape[0] != num_vertices:
         raise FacegenError(f"the dataset's meshes have {items[0].template.shape[0]} vertices but the model "
@@ -164,7 +168,8 @@ def evaluate(
     model = bundle.model.to(dev).eval()
     pooled_rows: list[dict] = []
     per_sequence: list[dict] = []
-    for item in tqdm(items, desc=f"evaluate {split}", unit="seq", disable=quiet, file=sys.stderr, leave=False):
+    bar = tqdm(items, desc=f"evaluate {split}", unit="seq", disable=quiet, file=sys.stderr, leave=False)
+    for item in bar:
         conditions = list(range(len(bundle.speakers))) if split == "test-b" else \
             [bundle.speakers.index(item.subject)]
         gt = item.vertices().reshape(item.num_frames, num_vertices, 3)
@@ -191,8 +196,9 @@ def evaluate(
         "data": str(dataset.root),
         "split": split,
         "sequences": len(items),
-        "conditioning": (f"each of the {len(bundle.speakers)} training speakers ({', '.join(bundle.speakers)}), "
-                         "averaged" if split == "test-b" else "the sequence's own speaker"),
+        "conditioning": (f"each of the {len(bundle.speakers)} training speakers "
+                         f"({', '.join(bundle.speakers)}), averaged" if split == "test-b"
+                         else "the sequence's own speaker"),
         "metrics": {k: metrics[k] for k in ("frames",) + METRICS},
         "units": dict(UNITS),
         "per_sequence": per_sequence,

@@ -75,7 +75,8 @@ def resolve_device(device: str, say: Warn) -> torch.device:
         say("no CUDA GPU available: training on the CPU")
         return torch.device("cpu")
     if device.startswith("cuda") and not torch.cuda.is_available():
-        raise FacegenError("--device cuda was asked for but torch sees no CUDA GPU: use --device cpu (or auto)")
+        raise FacegenError("--device cuda was asked for but torch sees no CUDA GPU: "
+                           "use --device cpu (or auto)")
     return torch.device(device)
 
 
@@ -142,8 +143,8 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
     return np.random.default_rng([seed, epoch]).permutation(n)
 
 
-def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: list[_Batch], order, batch_size: int = 1,
-                bar=None) -> float:
+def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: list[_Batch], order,
+                batch_size: int = 1, bar=None) -> float:
     """One pass over `batches` in `order`, one optimizer step per `batch_size` sequences; the mean loss.
 
     Raises _NonFinite at the first NaN or infinite loss (before it reaches the weights).
@@ -184,8 +185,8 @@ def _state_tensors(prefix: str, state: dict[str, torch.Tensor]) -> dict[str, tor
     return {f"{prefix}.{k}": v.detach().cpu().contiguous().clone() for k, v in state.items()}
 
 
-def save_checkpoint(path: Path, model: FaceModel, best: dict[str, torch.Tensor], optimizer: torch.optim.Optimizer,
-                    meta: dict) -> None:
+def save_checkpoint(path: Path, model: FaceModel, best: dict[str, torch.Tensor],
+                    optimizer: torch.optim.Optimizer, meta: dict) -> None:
     """Weights, best weights, Adam state and RNG state in one safetensors file, written atomically."""
     from safetensors.torch import save_file
 
@@ -212,7 +213,8 @@ def load_checkpoint(path: Path) -> tuple[dict[str, torch.Tensor], dict]:
             meta = json.loads((f.metadata() or {})["facegen_checkpoint"])
         tensors = load_file(str(path))
     except Exception as exc:  # safetensors has its own error types
-        raise FacegenError(f"checkpoint {path} is unreadable ({exc}): delete it and train without --resume") from exc
+        raise FacegenError(f"checkpoint {path} is unreadable ({exc}): delete it and train without "
+                           "--resume") from exc
     if meta.get("version", 0) > CHECKPOINT_VERSION:
         raise FacegenError(f"checkpoint {path} was written by a newer facegen: upgrade facegen")
     return tensors, meta
@@ -243,7 +245,8 @@ def write_curves(history: list[dict], folder: Path, png: bool = True) -> tuple[P
         writer = csv.writer(f)
         writer.writerow(["epoch", "train_loss", "val_loss", "seconds"])
         for h in history:
-            writer.writerow([h["epoch"], f"{h['train_loss']:.6e}", f"{h['val_loss']:.6e}", f"{h['seconds']:.2f}"])
+            writer.writerow([h["epoch"], f"{h['train_loss']:.6e}", f"{h['val_loss']:.6e}",
+                             f"{h['seconds']:.2f}"])
     if not png:
         return csv_path, None
     try:
@@ -256,10 +259,11 @@ def write_curves(history: list[dict], folder: Path, png: bool = True) -> tuple[P
     png_path = folder / "loss.png"
     epochs = [h["epoch"] for h in history]
     fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
-    ax.plot(epochs, [h["train_loss"] for h in history], label="training", marker="." if len(epochs) < 30 else None)
+    marker = "." if len(epochs) < 30 else None
+    ax.plot(epochs, [h["train_loss"] for h in history], label="training", marker=marker)
     val = [h["val_loss"] for h in history]
     if not all(math.isnan(v) for v in val):
-        ax.plot(epochs, val, label="validation", marker="." if len(epochs) < 30 else None)
+        ax.plot(epochs, val, label="validation", marker=marker)
     ax.set_xlabel("epoch")
     ax.set_ylabel("MSE (mesh units²)")
     ax.set_yscale("log")
@@ -321,10 +325,12 @@ def train(
     if fusion not in FUSIONS:
         raise FacegenError(f"unknown fusion {fusion!r}: choose one of {', '.join(FUSIONS)}")
     if epochs < 1 or batch_size < 1 or not lr > 0 or (max_sequences is not None and max_sequences < 1):
-        raise FacegenError("epochs, batch size and max sequences must be at least 1 and the learning rate positive")
+        raise FacegenError("epochs, batch size and max sequences must be at least 1 and the learning rate "
+                           "positive")
     out_bundle = Path(out_bundle)
     if not out_bundle.parent.is_dir() and str(out_bundle.parent):
-        raise FacegenError(f"output folder {out_bundle.parent} does not exist: create it or choose another -o path")
+        raise FacegenError(f"output folder {out_bundle.parent} does not exist: create it or choose another "
+                           "-o path")
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else default_checkpoint_dir(out_bundle)
     ckpt_path = ckpt_dir / CHECKPOINT
     dev = resolve_device(device, say)
@@ -351,7 +357,8 @@ def train(
     val_items = dataset.load(val_seqs, features, filters, backend, progress=not quiet)
     if not train_items:
         raise FacegenError(f"no usable training sequence in {dataset.root} for subjects "
-                           f"{' '.join(splits.train_subjects)}: check the files named above and the split options")
+                           f"{' '.join(splits.train_subjects)}: check the files named above and the split "
+                           "options")
     mesh = dataset.mesh
     if mesh.num_vertices != train_items[0].template.shape[0]:
         raise FacegenError(f"{dataset.root}/BIWI.ply has {mesh.num_vertices} vertices but the templates have "
@@ -359,8 +366,8 @@ def train(
 
     speakers = list(splits.train_subjects)
     cfg = ModelConfig(num_vertices=mesh.num_vertices, num_speakers=len(speakers),
-                      text_dim=backend.dim if backend is not None else 0, modalities=modalities, fusion=fusion,
-                      **(model_options or {}))
+                      text_dim=backend.dim if backend is not None else 0, modalities=modalities,
+                      fusion=fusion, **(model_options or {}))
     signature = {
         "model_config": cfg.to_dict(), "feature_config": features.to_dict(),
         "text_backend": backend.id if backend is not None else "none", "splits": splits.to_dict(),
@@ -385,8 +392,9 @@ def train(
             tensors, meta = load_checkpoint(ckpt_path)
             differs = [k for k in signature if meta.get("signature", {}).get(k) != signature[k]]
             if differs:
-                raise FacegenError(f"checkpoint {ckpt_path} was made with a different setup ({', '.join(differs)} "
-                                   "differ): train without --resume, or with another --checkpoint-dir")
+                raise FacegenError(f"checkpoint {ckpt_path} was made with a different setup "
+                                   f"({', '.join(differs)} differ): train without --resume, or with another "
+                                   "--checkpoint-dir")
             best_state = _restore(tensors, meta, model, optimizer)
             history, done = meta["history"], int(meta["epoch"])
             best_epoch, best_loss = int(meta["best_epoch"]), float(meta["best_loss"])
@@ -425,8 +433,8 @@ def train(
                 kept = (f"the last good checkpoint (epoch {epoch}) is in {ckpt_dir}" if epoch else
                         "no checkpoint was written yet")
                 raise FacegenError(
-                    f"the training loss became {exc.value} at epoch {epoch + 1} on {exc.name}: training stopped "
-                    f"and {kept}: lower --lr (and --resume), or check that sequence") from None
+                    f"the training loss became {exc.value} at epoch {epoch + 1} on {exc.name}: training "
+                    f"stopped and {kept}: lower --lr (and --resume), or check that sequence") from None
             bar.close()
             val_loss = _validate(model, val_batches)
             score = val_loss if val_batches else train_loss
@@ -441,14 +449,15 @@ def train(
             save_checkpoint(ckpt_path, model, best_state, optimizer, {
                 "signature": signature, "epoch": epoch + 1, "history": history, "best_epoch": best_epoch,
                 "best_loss": best_loss, "seconds": seconds})
-            if time.perf_counter() - last_png > PNG_EVERY:  # drawing takes ~0.3 s: not after every short epoch
+            if time.perf_counter() - last_png > PNG_EVERY:  # drawing takes ~0.3 s: not after short epochs
                 write_curves(history, ckpt_dir)
                 last_png = time.perf_counter()
             else:
                 write_curves(history, ckpt_dir, png=False)
             if not quiet:
-                tqdm.write(f"facegen: epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  val {val_loss:.4e}  "
-                           f"({history[-1]['seconds']:.1f} s){'  best' if improved else ''}", file=sys.stderr)
+                mark = "  best" if improved else ""
+                tqdm.write(f"facegen: epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  "
+                           f"val {val_loss:.4e}  ({history[-1]['seconds']:.1f} s){mark}", file=sys.stderr)
         seconds = seconds_before + time.perf_counter() - run_start
         csv_path, png_path = write_curves(history, ckpt_dir)
 
@@ -456,7 +465,8 @@ def train(
         bundle = _make_bundle(model.cpu().eval(), features, filters, backend, speakers, mesh, {
             "data": dataset.root.resolve().name, "epochs": len(history), "best_epoch": best_epoch,
             "best_loss": best_loss, "loss": "val" if val_batches else "train",
-            "metrics": {k: history[best_epoch - 1][k] for k in ("train_loss", "val_loss")} if best_epoch else {},
+            "metrics": ({k: history[best_epoch - 1][k] for k in ("train_loss", "val_loss")}
+                        if best_epoch else {}),
             "train_seconds": round(seconds, 1), "split": splits.to_dict(),
             "train_sequences": len(train_batches), "val_sequences": len(val_batches), "seed": seed, "lr": lr,
             "batch_size": batch_size, "device": str(dev)})

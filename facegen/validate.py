@@ -52,7 +52,7 @@ from facegen.mesh import Mesh
 
 DEFAULT_MAX_DISPLACEMENT = 0.25
 DEFAULT_FPS = 25.0
-SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend, as a fraction of the face size (float32 sums)
+SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend (float32 sums), as a share of the face size
 
 
 @dataclass
@@ -231,7 +231,6 @@ def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], 
         if rest is None:
             raise FacegenError(f"mesh {mesh.GetPath()} has blend shapes but no points to apply them to")
         times, frames = usd_skel.blendshape_frames(stage, mesh, rest)
-        names, _ = usd_skel.blend_targets(stage, mesh, len(rest))
         middle = len(times) // 2
         evaluated = usd_skel.skel_points(stage, mesh, times[middle])
     except FacegenError as exc:
@@ -240,24 +239,26 @@ def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], 
     size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
     finite = np.isfinite(evaluated).all(1)
     same = np.array_equal(finite, np.isfinite(frames[middle]).all(1))  # NaN is the "finite" check's failure
-    diff = np.sqrt(((evaluated[finite].astype(np.float64) - frames[middle][finite]) ** 2).sum(1)).max(initial=0.0)
+    gap = np.sqrt(((evaluated[finite].astype(np.float64) - frames[middle][finite]) ** 2).sum(1))
+    diff = float(gap.max(initial=0.0))
     agree = same and diff <= SKEL_AGREEMENT * size
     report.add(
         "blendshapes",
         agree,
-        f"{usd_skel.describe(names)} x {len(times)} frames; UsdSkel's evaluation at time {times[middle]:g} "
-        f"is {diff:.2g} from the blend" + ("" if agree else " (they disagree)"),
+        f"{usd_skel.describe(usd_skel.shape_names(mesh))} x {len(times)} frames; UsdSkel's evaluation at "
+        f"time {times[middle]:g} is {diff:.2g} from the blend" + ("" if agree else " (they disagree)"),
     )
     info = stage.GetRootLayer().customLayerData.get("facegen", {})
     stated = info.get("reconstruction") if isinstance(info, dict) else None
     if isinstance(stated, dict) and "relative_error" in stated:
         error, tolerance = float(stated["relative_error"]), stated.get("tolerance")
         ok = tolerance is None or error <= float(tolerance)
+        units = float(stated.get("max_error", float("nan")))
         report.add(
             "reconstruction",
             ok,
-            f"largest vertex error {float(stated.get('max_error', float('nan'))):.3g} = {error:.3g} of the face "
-            f"size" + ("" if tolerance is None else f"; tolerance {float(tolerance):g}")
+            f"largest vertex error {units:.3g} = {error:.3g} of the face size"
+            + ("" if tolerance is None else f"; tolerance {float(tolerance):g}")
             + ("" if ok else " (over the tolerance)"),
         )
     return times, frames
@@ -281,7 +282,8 @@ def _check_package(report: Report, path: Path, stage) -> None:
         outer = Ar.SplitPackageRelativePathOuter(resolved)[0] if Ar.IsPackageRelativePath(resolved) else ""
         if not outer or Path(outer).resolve() != path.resolve():
             problems.append(f"the audio {asset!r} does not resolve inside the package")
-    report.add("package", not problems, f"holds {', '.join(names)}" + ("; " + "; ".join(problems) if problems else ""))
+    detail = f"holds {', '.join(names)}" + ("; " + "; ".join(problems) if problems else "")
+    report.add("package", not problems, detail)
 
 
 def _check_faces(report: Report, faces: np.ndarray, template: Mesh | None, num_vertices: int | None) -> None:
@@ -316,8 +318,8 @@ def _check_time_samples(report: Report, stage, mesh, times: list[float], what: s
             f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected 0..{count - 1}"
         )
     extent = mesh.GetExtentAttr()
-    if what != "points":
-        pass  # blend shapes deform the rest pose; its extent is the mesh's (unsampled) extent
+    if what != "points":  # blend shapes deform the rest pose, whose extent is not sampled
+        pass
     elif list(extent.GetTimeSamples()) != times:
         problems.append("extent is not sampled at the same times as points")
     else:
@@ -375,7 +377,9 @@ def _check_values(
     )
 
 
-def _read_audio(report: Report, name: str, path, shown: str, reader=read_wav) -> tuple[np.ndarray, int] | None:
+def _read_audio(
+    report: Report, name: str, path, shown: str, reader=read_wav
+) -> tuple[np.ndarray, int] | None:
     try:
         samples, rate = reader(path)
     except FacegenError as exc:

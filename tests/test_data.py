@@ -67,7 +67,8 @@ def make_dataset(root: Path, *, subjects=SUBJECTS, sentences=range(1, 8), with_a
     writer = DatasetWriter(root)
     writer.write_mesh(mesh)
     rng = np.random.default_rng(0)
-    templates = {s: mesh.vertices + rng.normal(0, 0.002, mesh.vertices.shape).astype(np.float32) for s in subjects}
+    templates = {s: mesh.vertices + rng.normal(0, 0.002, mesh.vertices.shape).astype(np.float32)
+                 for s in subjects}
     writer.write_templates(templates)
     lips = mesh.regions["lips"]
     upper = mesh.regions["upper_face"]
@@ -263,7 +264,8 @@ def test_bad_sequences_are_reported_by_name_and_skipped(tmp_path):
 
 
 def test_text_needs_a_transcript_or_alignment(tmp_path, gpt2_backend):
-    root = make_dataset(tmp_path / "d", subjects=("F2",), sentences=[1, 2], with_alignments=False, with_text=False)
+    root = make_dataset(tmp_path / "d", subjects=("F2",), sentences=[1, 2], with_alignments=False,
+                        with_text=False)
     ds = Dataset(root, warn=None)
     feats = FeatureConfig()
     assert ds.load(ds.sequences(["F2_e01", "F2_e02"]), feats, mel_filters(feats), gpt2_backend) == []
@@ -275,7 +277,8 @@ def test_vertex_count_mismatch_is_a_named_error(tmp_path):
     np.save(root / "vertices_npy" / "F2_e02.npy", np.zeros((20, 3 * 199), np.float32))
     ds = Dataset(root, warn=None)
     feats = FeatureConfig()
-    with pytest.raises(FacegenError, match=r"F2_e02.npy has 199 vertices per frame but the template of F2 has 200"):
+    with pytest.raises(FacegenError, match=r"F2_e02.npy has 199 vertices per frame but the template of F2 "
+                                           r"has 200"):
         ds.load(ds.sequences(["F2_e01", "F2_e02"]), feats, mel_filters(feats))
 
 

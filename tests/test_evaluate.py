@@ -11,6 +11,7 @@ import torch
 from bundles import make_bundle
 from test_data import TOY_SPLITS, grid_face, make_dataset
 
+from facegen.data import Splits
 from facegen.errors import FacegenError
 from facegen.evaluate import evaluate, format_table, pool, sequence_metrics
 
@@ -66,7 +67,8 @@ def _community_metrics(gts, preds, templates, mouth_map, upper_map):
         motion_std_difference.append(gt_motion_std - pred_motion_std)
     vertices_gt_all = np.array(vertices_gt_all)
     vertices_pred_all = np.array(vertices_pred_all)
-    L2_dis_mouth_max = np.array([np.square(vertices_gt_all[:, v, :] - vertices_pred_all[:, v, :]) for v in mouth_map])
+    L2_dis_mouth_max = np.array([np.square(vertices_gt_all[:, v, :] - vertices_pred_all[:, v, :])
+                                 for v in mouth_map])
     L2_dis_mouth_max = np.transpose(L2_dis_mouth_max, (1, 0, 2))
     L2_dis_mouth_max = np.sum(L2_dis_mouth_max, axis=2)
     L2_dis_mouth_max = np.max(L2_dis_mouth_max, axis=1)
@@ -150,8 +152,8 @@ def test_evaluate_test_b_averages_over_every_training_speaker(toy, bundle_path):
             spk[0, s] = 1
             with torch.inference_mode():
                 off = bundle.model(torch.from_numpy(item.mel)[None], None, spk)[0].numpy()
-            rows.append(sequence_metrics(item.template + off, item.vertices().reshape(-1, 200, 3), item.template,
-                                         lips, upper))
+            gt = item.vertices().reshape(-1, 200, 3)
+            rows.append(sequence_metrics(item.template + off, gt, item.template, lips, upper))
     assert rows[0]["lve"] != pytest.approx(rows[1]["lve"])  # the speakers really differ
     expect = pool(rows)
     for k in ("lve", "fdd", "mean_error", "lip_error"):
@@ -178,11 +180,25 @@ def test_a_zero_model_scores_the_motion_itself(toy, tmp_path):
 
 def test_evaluate_refuses_mismatches(toy, bundle_path, tmp_path):
     with pytest.raises(FacegenError, match="subjects F1 of split test-a are not speakers"):
-        evaluate(bundle_path, toy, "test-a", splits=TOY_SPLITS.__class__(train_subjects=("F1",), test_subjects=(),
-                                                                          train_sentences="1-4", val_sentences="5",
-                                                                          test_sentences="6-7"), quiet=True)
+        evaluate(bundle_path, toy, "test-a", quiet=True,
+                 splits=Splits(train_subjects=("F1",), test_subjects=(), train_sentences="1-4",
+                               val_sentences="5", test_sentences="6-7"))
     with pytest.raises(FacegenError, match="unknown split"):
         evaluate(bundle_path, toy, "test", quiet=True)
-    other = make_bundle(grid_face(8, 5), tmp_path / "small.safetensors", speakers=("F2", "F3"), modalities="audio")
+    other = make_bundle(grid_face(8, 5), tmp_path / "small.safetensors", speakers=("F2", "F3"),
+                        modalities="audio")
     with pytest.raises(FacegenError, match="have 200 vertices but the model 40"):
         evaluate(other.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
+
+
+def test_metrics_on_the_real_biwi_topology(biwi_template):
+    """The community's regions on the real BIWI mesh: our LVE/FDD equal cal_metric.py's numbers."""
+    rng = np.random.default_rng(5)
+    lips, upper = biwi_template.regions["lips"], biwi_template.regions["upper_face"]
+    template = biwi_template.vertices.astype(np.float64)
+    gt = template + rng.normal(scale=1e-3, size=(6, len(template), 3))
+    pred = template + rng.normal(scale=1e-3, size=(6, len(template), 3))
+    ours = pool([sequence_metrics(pred, gt, template, lips, upper)])
+    lve, fdd = _community_metrics([gt], [pred], [template], lips, upper)
+    assert ours["lve"] == pytest.approx(lve, rel=1e-10) and ours["fdd"] == pytest.approx(fdd, rel=1e-10)
+    assert len(np.setdiff1d(np.arange(len(template)), upper)) == len(template) - 7784  # lower face

@@ -111,7 +111,8 @@ def test_blendshapes_layout(tmp_path, grid_mesh):
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
     assert mesh.GetPointsAttr().GetNumTimeSamples() == 0
     np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get()), grid_mesh.vertices)
-    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), grid_mesh.faces)
+    faces = np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    np.testing.assert_array_equal(faces, grid_mesh.faces)
     binding = UsdSkel.BindingAPI(mesh.GetPrim())
     assert mesh.GetPrim().HasAPI(UsdSkel.BindingAPI)
     assert binding.GetSkeletonRel().GetTargets() == [Sdf.Path("/Face/Skeleton")]
@@ -145,7 +146,7 @@ def test_blendshapes_layout(tmp_path, grid_mesh):
     assert samples.shape == (FRAMES, len(names)) and samples.dtype == np.float32
     assert samples.min() >= 0.0 and samples.max() <= 1.0
     np.testing.assert_array_equal(samples[:, -1], 1.0)
-    assert (samples[:, :-1].min(0) == 0).all() and (samples[:, :-1].max(0) == 1).all()  # each curve spans 0..1
+    assert (samples[:, :-1].min(0) == 0).all() and (samples[:, :-1].max(0) == 1).all()  # each spans 0..1
 
     # audio as in points mode
     sound = UsdMedia.SpatialAudio(stage.GetPrimAtPath("/Face/Audio"))
@@ -206,13 +207,14 @@ def test_tolerance_sets_the_number_of_targets(tmp_path, grid_mesh):
 
 def test_fixed_and_per_frame_targets(tmp_path, grid_mesh):
     anim = rich_animation(grid_mesh, frames=20)
-    write_animation(anim, tmp_path / "k3.usdc", mode="blendshapes", morph_targets=3)
+    write_animation(anim, tmp_path / "k3.usdc", mode="blendshapes", morph_targets="3")  # as the CLI passes it
     stage = Usd.Stage.Open(str(tmp_path / "k3.usdc"))
     info = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]
     assert "tolerance" not in info and info["targets"] == 4  # 3 PCA targets + rest
-    names = list(UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation")).GetBlendShapesAttr().Get())
-    assert names == ["pca_000", "pca_001", "pca_002", "rest"]
-    assert max_distance(usdskel_points(stage, 10.0), anim.vertices[10]) <= info["max_error"] + 1e-6 * grid_mesh.size
+    animation = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation"))
+    assert list(animation.GetBlendShapesAttr().Get()) == ["pca_000", "pca_001", "pca_002", "rest"]
+    error = max_distance(usdskel_points(stage, 10.0), anim.vertices[10])
+    assert error <= info["max_error"] + 1e-6 * grid_mesh.size
 
     # "all": one target per frame, one-hot weights, no rest target, exact
     write_animation(anim, tmp_path / "all.usdc", mode="blendshapes", morph_targets="all")
@@ -317,9 +319,11 @@ def test_validate_blendshapes(tmp_path, grid_mesh):
     assert broken("short", short_sample) == cascade
     assert "time 4 has a different count" in validate(tmp_path / "short.usda").check("blendshapes").detail
     assert broken("offsets", short_offsets) == cascade
-    assert "7 offsets for a mesh of 120 points" in validate(tmp_path / "offsets.usda").check("blendshapes").detail
+    detail = validate(tmp_path / "offsets.usda").check("blendshapes").detail
+    assert "7 offsets for a mesh of 120 points" in detail
     assert broken("over", over_tolerance) == {"reconstruction"}
-    assert "blendShapeWeights sampled at 0, 1, 2, 3, ..." in validate(tmp_path / "gap.usda").check("time samples").detail
+    detail = validate(tmp_path / "gap.usda").check("time samples").detail
+    assert "blendShapeWeights sampled at 0, 1, 2, 3, ..." in detail
 
 
 def test_biwi_blendshapes(tmp_path, biwi_template):

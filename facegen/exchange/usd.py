@@ -1,4 +1,5 @@
-"""USD: the animation as one UsdGeom.Mesh with one `points` time sample per frame, audio beside it.
+"""USD: the animation as one UsdGeom.Mesh with one `points` time sample per frame (or UsdSkel blend
+shapes), audio beside it.
 
 Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate):
 
@@ -111,7 +112,8 @@ def _check_mode(anim: Animation, mode: str, morph_targets: int | str | None, tol
         given = [n for n, v in (("morph targets", morph_targets), ("tolerance", tolerance)) if v is not None]
         if given:
             raise FacegenError(
-                f"{' and '.join(given)} apply to USD blendshapes only: add --usd-mode blendshapes or drop them"
+                f"{' and '.join(given)} apply to USD blendshapes only: "
+                "add --usd-mode blendshapes or drop them"
             )
         return None
     return usd_skel.basis_for(anim, morph_targets, tolerance)

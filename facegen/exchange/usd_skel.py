@@ -17,9 +17,9 @@ mesh's `points` hold the template only, with no time samples):
                               skel:blendShapeTargets (the BlendShape prims below, same order),
                               primvars:skel:jointIndices [0] / jointWeights [1] (constant, one influence),
                               primvars:skel:geomBindTransform identity
-    /Face/Mesh/<name>         BlendShape: offsets [V], or, when a quarter or more of the target's offsets
-                              are zero, pointIndices and the offsets of only those vertices (smaller:
-                              4 + 12 bytes per vertex instead of 12); `rest` is a target whose weight is 1 in
+    /Face/Mesh/<name>         BlendShape: offsets [V]; or, when a quarter or more of the target's offsets
+                              are zero, pointIndices (the vertices it moves) and their offsets only
+                              (4 + 12 bytes per moved vertex < 12 per vertex); `rest` is a target whose weight is 1 in
                               every frame (it holds the constant part the [0, 1] rescaling moved out of the
                               weights; absent when it is zero)
 
@@ -48,7 +48,10 @@ def basis_for(anim: Animation, morph_targets: int | str | None, tolerance: float
 
     Vertices that never move in `anim` also get exactly zero offsets in every target and in `rest` (PCA
     leaves float rounding there, and a fixed K has no error budget to drop it), so BlendShapes can leave
-    them out; the error is measured again then."""
+    them out; the error is measured again then. `morph_targets` may be a string ("12", "all": the CLI's).
+    """
+    if isinstance(morph_targets, str) and morph_targets.strip().isdigit():
+        morph_targets = int(morph_targets)
     basis = morph_basis(
         anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance),
         unit_weights=True, sparse=True,
@@ -142,15 +145,19 @@ def author_weights(layer, weights: np.ndarray) -> None:
 # ---- reading -----------------------------------------------------------------------------------------
 
 
-def has_blendshapes(mesh) -> bool:
-    """True when the mesh is bound to blend shapes (skel:blendShapes authored and not empty)."""
+def shape_names(mesh) -> list[str]:
+    """The mesh's skel:blendShapes (empty when it has no UsdSkel binding)."""
     from pxr import UsdSkel
 
     prim = mesh.GetPrim()
     if not prim.HasAPI(UsdSkel.BindingAPI):
-        return False
-    names = UsdSkel.BindingAPI(prim).GetBlendShapesAttr().Get()
-    return bool(names)
+        return []
+    return [str(n) for n in (UsdSkel.BindingAPI(prim).GetBlendShapesAttr().Get() or [])]
+
+
+def has_blendshapes(mesh) -> bool:
+    """True when the mesh is bound to blend shapes (skel:blendShapes authored and not empty)."""
+    return bool(shape_names(mesh))
 
 
 def animation_of(mesh):
@@ -184,9 +191,8 @@ def blend_targets(stage, mesh, num_points: int) -> tuple[list[str], np.ndarray]:
     A target whose prim, offsets or pointIndices do not fit the mesh is a FacegenError."""
     from pxr import UsdSkel
 
-    binding = UsdSkel.BindingAPI(mesh.GetPrim())
-    names = [str(n) for n in (binding.GetBlendShapesAttr().Get() or [])]
-    targets = binding.GetBlendShapeTargetsRel().GetTargets()
+    names = shape_names(mesh)
+    targets = UsdSkel.BindingAPI(mesh.GetPrim()).GetBlendShapeTargetsRel().GetTargets()
     if len(targets) != len(names):
         raise FacegenError(
             f"mesh {mesh.GetPath()} names {len(names)} blend shapes but targets {len(targets)} prims: "
@@ -228,7 +234,8 @@ def blendshape_frames(stage, mesh, rest: np.ndarray) -> tuple[list[float], np.nd
     bad = [t for t, w in zip(times, samples, strict=True) if len(w) != len(anim_names)]
     if bad:
         raise FacegenError(
-            f"blendShapeWeights at time {bad[0]:g} has a different count than the {len(anim_names)} blendShapes"
+            f"blendShapeWeights at time {bad[0]:g} has a different count than the "
+            f"{len(anim_names)} blendShapes"
         )
     column = {name: i for i, name in enumerate(anim_names)}
     weights = np.zeros((len(times), len(names)), np.float32)

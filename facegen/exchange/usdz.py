@@ -56,9 +56,6 @@ def write(
             anim, stage_file, mode=mode, morph_targets=morph_targets, tolerance=tolerance,
             meters_per_unit=meters_per_unit, write_audio=write_audio,
         )
-        layer = Sdf.Layer.Find(str(stage_file))
-        if layer is not None:  # pxr may keep the layer just written: package the file as it is on disk
-            layer.Reload(force=True)
         made = UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(stage_file)), str(tmp))
         if not made or not tmp.is_file():
             raise FacegenError(f"cannot write the USDZ package {path}: check free disk space and permissions")

@@ -1,0 +1,48 @@
+"""The add-on's import operator (File > Import > facegen animation); Blender only.
+
+No `from __future__ import annotations` here: Blender reads the property annotations as objects.
+"""
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, StringProperty
+from bpy_extras.io_utils import ImportHelper
+
+from .facegen_import import import_file
+
+
+class FACEGEN_OT_import(bpy.types.Operator, ImportHelper):
+    """Import a facegen animation with its frame rate, frame range and sound"""
+
+    bl_idname = "facegen.import_animation"
+    bl_label = "Import facegen animation"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012 (Blender reads it as a set)
+
+    filter_glob: StringProperty(default="*.glb;*.gltf;*.usd;*.usda;*.usdc;*.usdz", options={"HIDDEN"})
+    fps: FloatProperty(name="FPS", description="Frame rate when the file states none (0: the file's)",
+                       default=0.0, min=0.0)
+    sound: BoolProperty(name="Sound strip", description="Add the WAV beside the file as a sound strip",
+                        default=True)
+
+    def execute(self, context):
+        try:
+            done = import_file(self.filepath, fps=self.fps or None, sound=self.sound, scene=context.scene)
+        except (OSError, RuntimeError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"facegen: {done['frames']} frames at {done['fps']:g} fps"
+                    + (", with sound" if done["sound"] else ""))
+        return {"FINISHED"}
+
+
+def _menu(self, context) -> None:
+    self.layout.operator(FACEGEN_OT_import.bl_idname, text="facegen animation (.glb/.gltf/.usd*)")
+
+
+def register() -> None:
+    bpy.utils.register_class(FACEGEN_OT_import)
+    bpy.types.TOPBAR_MT_file_import.append(_menu)
+
+
+def unregister() -> None:
+    bpy.types.TOPBAR_MT_file_import.remove(_menu)
+    bpy.utils.unregister_class(FACEGEN_OT_import)
