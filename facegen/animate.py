@@ -15,6 +15,7 @@ from facegen.errors import FacegenError
 from facegen.mesh import Mesh, check_topology, read_mesh
 
 Progress = Callable[[str], None]
+LONG_INPUT_SECONDS = 20.0  # stage-by-stage progress is reported for clips at least this long
 
 
 def _quiet(_: str) -> None:
@@ -28,8 +29,9 @@ def get_words(
     text: str | None = None,
     alignment: str | os.PathLike | None = None,
     progress: Progress = _quiet,
+    warn: Progress = _quiet,
 ) -> tuple[list, str]:
-    """Word timings for the clip and where they came from ("alignment", "forced", "recognised")."""
+    """Word timings for the clip and where they came from (alignment file, forced alignment, recognition)."""
     from facegen import align
 
     duration = len(samples) / sr
@@ -40,7 +42,8 @@ def get_words(
             raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
         progress("aligning the transcript to the speech (pocketsphinx)")
         return align.align(samples, sr, text), "forced alignment"
-    progress("no transcript given: recognising the words with pocketsphinx (lower quality than a transcript)")
+    warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a transcript; "
+         "pass --text, --text-file or --alignment for better upper-face motion)")
     return align.recognize(samples, sr), "speech recognition"
 
 
@@ -82,12 +85,14 @@ def animate(
     template: str | os.PathLike | Mesh | None = None,
     text_model: str | None = None,
     progress: Progress = _quiet,
+    warn: Progress = _quiet,
 ) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
     recognition; `no_text=True` feeds zero text features instead. `bundle` is a loaded Bundle or a path
-    (None: the built-in default model).
+    (None: the built-in default model). `progress` receives stage messages for long clips (≥ 20 s),
+    `warn` receives notes the user should always see.
     """
     if not isinstance(bundle, Bundle):
         bundle = load_bundle(bundle)
@@ -97,12 +102,14 @@ def animate(
     cfg = bundle.features
     check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
     T = num_frames(len(samples) / sr, cfg.fps)
+    if len(samples) / sr < LONG_INPUT_SECONDS:
+        progress = _quiet
 
     words: list = []
     source = "none (--no-text)"
     text_feats = None
     if bundle.config.uses_text and not no_text:
-        words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress)
+        words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress, warn=warn)
         from facegen.text import load_text_backend, text_features
 
         progress(f"text features ({bundle.text_backend}) for {len(words)} words")

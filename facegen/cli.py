@@ -59,26 +59,38 @@ def cli(debug: bool) -> None:
 @click.option("--text-model", help="Local folder (or cached id) of the text model, if not where the bundle says.")
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
               help="Output file: .usda .usdc .usd .npy (and more, see README).")
+@click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
+              help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
+@click.option("--morph-targets", metavar="K|all",
+              help="glTF / USD blendshapes: number of PCA morph targets (default: as many as the tolerance "
+                   "needs), or 'all' for one per frame (short clips).")
+@click.option("--tolerance", type=float,
+              help="glTF / USD blendshapes: largest vertex error allowed, as a fraction of the face size "
+                   "(default 1e-3).")
 @click.option("--preview", type=click.Path(dir_okay=False), help="Also render a preview video (.mp4) with sound.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
-def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, preview,
-            quiet):
+def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, usd_mode,
+            morph_targets, tolerance, preview, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.animate import animate as run
     from facegen.atomic import check_writable
-    from facegen.exchange import format_module, write_animation
+    from facegen.exchange import check_write_options, format_module, write_animation
 
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
     check_writable(output)
+    options = {k: v for k, v in (("mode", usd_mode), ("morph_targets", morph_targets), ("tolerance", tolerance))
+               if v is not None}
+    check_write_options(output, options)
     if preview:
         from facegen.render import check_output
 
         check_output(preview)
     progress = _progress(quiet)
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
-               bundle=model, template=template, text_model=text_model, progress=progress)
-    written = write_animation(anim, output, audio_source=audio)
+               bundle=model, template=template, text_model=text_model, progress=progress,
+               warn=_progress(False))
+    written = write_animation(anim, output, audio_source=audio, **options)
     progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
     if preview:
         from facegen.render import render_animation
@@ -137,7 +149,7 @@ def align(audio, text, text_file, output):
         raise FacegenError(f"cannot write alignments as {Path(output).suffix or 'no extension'}: use .json or .TextGrid")
     samples, sr = load_audio(audio)
     check_speech(samples, sr, 25.0, name=f"audio file {audio}")
-    words, _ = get_words(samples, sr, text=_read_text(text, text_file), progress=_progress(bool(output) is False))
+    words, _ = get_words(samples, sr, text=_read_text(text, text_file), warn=_progress(False))
     if output:
         al.write_alignment(words, output)
     else:

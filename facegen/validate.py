@@ -117,9 +117,11 @@ def validate(
     *,
     require_audio: bool = True,
     max_displacement: float = DEFAULT_MAX_DISPLACEMENT,
+    reference: str | os.PathLike | None = None,
 ) -> Report:
     """Check an animation file written by facegen (or any file of the same layout); never raises for
-    a bad file: every problem is a failed check in the returned Report."""
+    a bad file: every problem is a failed check in the returned Report. `reference` (glTF only): the
+    source animation the file's morph targets must reproduce within its stated tolerance."""
     path = Path(path)
     report = Report(str(path))
     suffix = path.suffix.lower()
@@ -127,8 +129,12 @@ def validate(
         _validate_usd(report, path, template, fps, audio_path, require_audio, max_displacement)
     elif suffix in npy_format.EXTENSIONS:
         _validate_npy(report, path, template, fps, audio_path, require_audio, max_displacement)
+    elif suffix in (".glb", ".gltf"):  # glTF checks live in validate_gltf.py
+        from facegen.validate_gltf import validate_gltf
+
+        validate_gltf(report, path, template, fps, audio_path, require_audio, max_displacement, reference)
     else:
-        exts = ", ".join(usd_format.EXTENSIONS + usdz_format.EXTENSIONS + npy_format.EXTENSIONS)
+        exts = ", ".join(usd_format.EXTENSIONS + usdz_format.EXTENSIONS + npy_format.EXTENSIONS + (".glb", ".gltf"))
         report.add("file", False, f"cannot validate {suffix or 'files without extension'}: use one of {exts}")
     return report
 

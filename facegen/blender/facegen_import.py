@@ -216,6 +216,10 @@ def import_file(
         raise RuntimeError(f"Blender could not import {path} ({result})")
     objects = [o for o in bpy.data.objects if o not in before]
     meshes = [o for o in objects if o.type == "MESH"]
+    for obj in meshes:
+        keys = obj.data.shape_keys
+        if keys is not None and keys.animation_data is not None and keys.animation_data.action is not None:
+            snap_keys_to_frames(keys.animation_data.action)
     frames = info["frames"] or _imported_frames(scene, meshes, info["format"])
     scene.frame_start = 0
     scene.frame_end = max(0, frames - 1)
@@ -235,6 +239,37 @@ def import_file(
         "sound": strip.name if strip is not None else None,
         "audio": wav,
     }
+
+
+def action_fcurves(action):
+    """The F-curves of an action: layered actions (Blender 4.4+) and the older flat ones."""
+    layers = getattr(action, "layers", None)
+    if layers:
+        for layer in layers:
+            for strip in layer.strips:
+                for slot in action.slots:
+                    bag = strip.channelbag(slot)
+                    if bag is not None:
+                        yield from bag.fcurves
+    elif hasattr(action, "fcurves"):
+        yield from action.fcurves
+
+
+def snap_keys_to_frames(action, within: float = 1e-3) -> int:
+    """Move keys that sit a hair off a whole frame onto it (glTF times frame / fps are float32, so
+    frame 59 at 25 fps arrives as 58.999996); returns how many keys moved."""
+    moved = 0
+    for fcurve in action_fcurves(action):
+        for key in fcurve.keyframe_points:
+            whole = round(key.co.x)
+            shift = whole - key.co.x
+            if shift and abs(shift) <= within:
+                key.co.x = whole
+                key.handle_left.x += shift
+                key.handle_right.x += shift
+                moved += 1
+        fcurve.update()
+    return moved
 
 
 def _imported_frames(scene, meshes, kind: str) -> int:

@@ -50,12 +50,11 @@ def format_module(path: str | os.PathLike) -> ModuleType:
     return importlib.import_module(FORMATS[suffix])
 
 
-def write_animation(anim: Animation, path: str | os.PathLike, **options) -> list[Path]:
-    """Write `anim` in the format of `path`'s extension; return the files written (asset first).
+OPTION_FLAGS = {"mode": "--usd-mode", "morph_targets": "--morph-targets", "tolerance": "--tolerance"}
 
-    Options are the format's keyword arguments (e.g. `meters_per_unit` for USD, `write_audio` for all);
-    an option the format does not take is a FacegenError.
-    """
+
+def check_write_options(path: str | os.PathLike, options: dict) -> None:
+    """Refuse options the format of `path` does not take (before any work is done)."""
     module = format_module(path)
     accepted = [
         name
@@ -64,10 +63,20 @@ def write_animation(anim: Animation, path: str | os.PathLike, **options) -> list
     ]
     unknown = sorted(set(options) - set(accepted))
     if unknown:
+        names = ", ".join(OPTION_FLAGS.get(k, k) for k in unknown)
         raise FacegenError(
-            f"option {', '.join(unknown)} does not apply to {Path(path).suffix} files "
-            f"(it takes: {', '.join(accepted) or 'no options'})"
+            f"{names} does not apply to {Path(path).suffix} files: drop it or choose another output format"
         )
+
+
+def write_animation(anim: Animation, path: str | os.PathLike, **options) -> list[Path]:
+    """Write `anim` in the format of `path`'s extension; return the files written (asset first).
+
+    Options are the format's keyword arguments (e.g. `meters_per_unit` for USD, `write_audio` for all);
+    an option the format does not take is a FacegenError.
+    """
+    check_write_options(path, options)
+    module = format_module(path)
     return module.write(anim, path, **options)
 
 

@@ -19,9 +19,9 @@ mesh's `points` hold the template only, with no time samples):
                               primvars:skel:geomBindTransform identity
     /Face/Mesh/<name>         BlendShape: offsets [V]; or, when a quarter or more of the target's offsets
                               are zero, pointIndices (the vertices it moves) and their offsets only
-                              (4 + 12 bytes per moved vertex < 12 per vertex); `rest` is a target whose weight is 1 in
-                              every frame (it holds the constant part the [0, 1] rescaling moved out of the
-                              weights; absent when it is zero)
+                              (4 + 12 bytes per moved vertex < 12 per vertex). `rest` is a target whose
+                              weight is 1 in every frame: the constant part the [0, 1] rescaling moved out
+                              of the weights (absent when it is zero)
 
 The reconstruction error goes in customLayerData["facegen"]["reconstruction"] (see `layer_info`).
 """

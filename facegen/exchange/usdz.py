@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 
 from facegen.animation import Animation
-from facegen.atomic import atomic_path, check_writable
+from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.exchange import usd
 from facegen.mesh import Mesh
@@ -48,7 +48,6 @@ def write(
     path = Path(path)
     if path.suffix.lower() not in EXTENSIONS:
         raise FacegenError(f"{path} is not a USDZ file name: use .usdz")
-    check_writable(path)
     folder = path.parent if str(path.parent) else Path(".")
     with atomic_path(path) as tmp, tempfile.TemporaryDirectory(prefix=f".{path.stem}.", dir=folder) as work:
         stage_file = Path(work) / f"{path.stem}.usdc"

@@ -24,13 +24,15 @@ finished sequences (so an interrupted run resumes); a folder made with other par
 
 Determinism: the same parameters give byte-identical sequence files. libespeak-ng keeps waveform state
 between calls (pitch flutter, gain control) that no API resets, so every speaker is generated in a fresh
-process (`python -m facegen.synth.corpus`, never forked) that synthesises that speaker's sentences in order from e01 up to the
-last one asked for — also those it does not write (synthesis takes ~0.1 s). Parallelism is per speaker.
+process (`python -m facegen.synth.corpus`, never forked) that synthesises that speaker's sentences in
+order from e01 up to the last one asked for — also those it does not write (synthesis takes ~0.1 s).
+Parallelism is per speaker.
 
 Selections: `speakers` and `sentences` (all 14 × e01–e48 by default), or `preset="paper"`: the training
-speakers (F2 F3 F4 M3 M4 M5) e01–e48 and the test-B speakers e37–e48 — 384 sequences, ~12.5 GB. With
-facegen.data.Splits the defaults give train/val/test-a/test-b; the unseen-emotion-word test is
-Splits(test_sentences=range(41, 49)) (test-a: training speakers, test-b: unseen speakers).
+speakers (F2 F3 F4 M3 M4 M5) e01–e48 and the test-B speakers e37–e48 — 384 sequences, 12.7 GB,
+generated in ~1.5 min with 2 workers. With facegen.data.Splits the defaults give train/val/test-a/test-b;
+the unseen-emotion-word test is Splits(test_sentences=range(41, 49)) (test-a: training speakers, test-b:
+unseen speakers).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterable
@@ -123,7 +126,8 @@ def selection(speakers: str | Iterable[str] | None = None, sentences: str | Iter
         speaker_index(name)
     bad = [n for n in numbers if n not in SENTENCES]
     if bad:
-        raise FacegenError(f"no sentence e{bad[0]:02d} in the synthetic corpus: choose from 1-{max(SENTENCES)}")
+        raise FacegenError(f"no sentence e{bad[0]:02d} in the synthetic corpus: "
+                           f"choose from 1-{max(SENTENCES)}")
     if not names or not numbers:
         raise FacegenError("nothing to generate: give at least one speaker and one sentence")
     return {name: numbers for name in names}
@@ -274,7 +278,8 @@ def _check_space(out: Path, sequences: int, fps: float) -> None:
     free = shutil.disk_usage(out).free
     if need > free:
         raise FacegenError(f"the {sequences} sequences need about {need / 1e9:.1f} GB but {out} has "
-                           f"{free / 1e9:.1f} GB free: free space, or generate fewer (--subjects, --sentences)")
+                           f"{free / 1e9:.1f} GB free: free space, or generate fewer "
+                           "(--subjects, --sentences)")
 
 
 def _write_static(out: Path, writer, wanted: dict[str, tuple[int, ...]], read_templates_pkl) -> None:
@@ -328,15 +333,17 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
             return
         numbers = ",".join(str(n) for n in todo[speaker])
         cmd = [sys.executable, "-m", "facegen.synth.corpus", str(out), speaker, numbers, str(seed), repr(fps)]
-        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) as proc:
+        with tempfile.TemporaryFile("w+") as err, \
+                subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, env=env) as proc:
             with lock:
                 procs.append(proc)
-            assert proc.stdout is not None and proc.stderr is not None
+            assert proc.stdout is not None
             for line in proc.stdout:
                 if line.strip():
                     record(line)
-            errors = proc.stderr.read()
             code = proc.wait()
+            err.seek(0)
+            errors = err.read()
         if code != 0 and not stopping.is_set():
             last = (errors.strip().splitlines() or [f"exit status {code}"])[-1]
             if code == 2:  # a FacegenError: its message is the last line

@@ -82,7 +82,8 @@ def check_sentences(sentences: dict[int, str] | None = None) -> None:
         held = emotional_words(text, HELD_OUT_LEXICON)
         train = emotional_words(text, TRAIN_LEXICON)
         if number in UNSEEN_SENTENCES:
-            assert 1 <= len(held) <= 2 and not train, f"e{number:02d} must hold 1-2 held-out words only: {text}"
+            assert 1 <= len(held) <= 2 and not train, \
+                f"e{number:02d} must hold 1-2 held-out words only: {text}"
         else:
             assert not held, f"e{number:02d} holds the held-out words {held}: {text}"
             assert len(train) <= 2, f"e{number:02d} holds more than two emotional words: {text}"

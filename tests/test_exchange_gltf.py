@@ -1,0 +1,334 @@
+"""glTF/GLB writer and reader, the PCA morph basis, the MP3 sync, and `validate` on glTF files.
+
+Animations come from the procedural face and its rig (templates/, facegen.synth): 23,370 vertices,
+lips/jaw/lids/brows driven by random phones, with a noise-burst sound exactly T / fps seconds long.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pygltflib
+import pytest
+
+from facegen.animation import Animation
+from facegen.errors import FacegenError
+from facegen.exchange import gltf, mp3, pca, read_animation, write_animation
+
+IN_CI = os.environ.get("CI", "").lower() == "true"
+
+
+@functools.cache
+def _rig():
+    from facegen.synth.face import load_template
+    from facegen.synth.rig import Rig
+
+    mesh = load_template()
+    return mesh, Rig(mesh)
+
+
+def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 16000) -> Animation:
+    """A speech-like animation of the procedural face (random phones through the rig) with a sound of
+    noise bursts (loud where the jaw opens) lasting exactly frames / fps seconds."""
+    from facegen.synth import rig as rigs
+
+    mesh, rig = _rig()
+    rng = np.random.default_rng(seed)
+    seconds = frames / fps
+    phones, t = [], 0.1
+    names = sorted(rigs.PHONEME_VISEMES)
+    while t < seconds - 0.15:
+        if rng.random() < 0.08:
+            t += rng.uniform(0.15, 0.4)
+            continue
+        d = rng.uniform(0.05, 0.16)
+        phones.append((str(rng.choice(names)), t, min(t + d, seconds)))
+        t += d
+    lexicon = sorted(rigs.LEXICON)
+    words = [SimpleNamespace(text=str(rng.choice(lexicon)), start=float(s), end=float(s) + 0.3)
+             for s in np.sort(rng.uniform(0, max(seconds - 0.5, 0.1), max(1, int(seconds / 5))))]
+    curves = rigs.motion_curves(phones, words, frames, fps, rng=rng)
+    vertices = rig.pose(curves)
+    n = round(seconds * sample_rate)
+    envelope = np.interp(np.arange(n) / sample_rate, np.arange(frames) / fps, curves[:, 0] + 0.05)
+    audio = (0.5 * envelope * rng.standard_normal(n)).astype(np.float32)
+    return Animation(vertices=vertices, faces=mesh.faces, fps=fps, template=mesh.vertices, audio=audio,
+                     sample_rate=sample_rate, regions=dict(mesh.regions), metadata={"speaker": "test", "seed": seed})
+
+
+@pytest.fixture(scope="module")
+def clip() -> Animation:
+    return rig_clip(100)
+
+
+def _doc(path: Path) -> pygltflib.GLTF2:
+    return pygltflib.GLTF2().load(str(path))
+
+
+def _node_ready() -> bool:
+    if shutil.which("node") and (gltf_assets() / "node_modules" / "gltf-validator").is_dir():
+        return True
+    if IN_CI:
+        pytest.fail("node or the gltf-validator package is missing in CI: `make node-deps` should have run")
+    pytest.skip("node or the npm package gltf-validator is missing: run `make node-deps`")
+    return False
+
+
+def gltf_assets() -> Path:
+    import facegen
+
+    return Path(facegen.__file__).parent / "assets"
+
+
+# ---- the PCA basis ---------------------------------------------------------------------------------------
+
+
+def test_morph_basis_meets_each_tolerance_with_fewest_targets(clip):
+    size = clip.size
+    offsets = clip.vertices - clip.template[None]
+    previous = 0
+    for tolerance in (1e-2, 1e-3, 1e-4):
+        basis = pca.morph_basis(clip, None, tolerance, unit_weights=True)
+        rebuilt = clip.template[None] + basis.offsets()
+        error = float(np.linalg.norm(rebuilt - clip.vertices, axis=2).max())
+        assert error <= tolerance * size
+        assert abs(error - basis.max_error) <= 1e-6 * size
+        assert basis.weights.min() >= 0.0 and basis.weights.max() <= 1.0
+        assert basis.k >= previous  # tighter tolerance, no fewer targets
+        previous = basis.k
+        if basis.k > 1:  # one target fewer misses the tolerance
+            fewer = pca.morph_basis(clip, basis.k - 1, unit_weights=True)
+            assert fewer.max_error > tolerance * size
+    assert previous > 3
+    assert np.abs(offsets).max() > 100 * 1e-4 * size  # the clip really moves
+
+
+def test_morph_basis_fixed_k_and_all(clip):
+    basis = pca.morph_basis(clip, 4)
+    assert basis.k == 4 and basis.targets.shape == (4, clip.num_vertices, 3)
+    assert np.abs(basis.weights).max() <= 1.0 + 1e-6
+    exact = pca.morph_basis(clip, "all")
+    assert exact.k == clip.num_frames and exact.max_error < 1e-6 * clip.size
+    assert np.array_equal(exact.weights, np.eye(clip.num_frames, dtype=np.float32))
+
+
+def test_morph_basis_sparse_zeroes_static_vertices_within_budget(clip):
+    dense = pca.morph_basis(clip, None, 1e-3, unit_weights=True)
+    sparse = pca.morph_basis(clip, None, 1e-3, unit_weights=True, sparse=True)
+    assert sparse.max_error <= 1e-3 * clip.size
+    moving = np.linalg.norm(clip.vertices - clip.template[None], axis=2).max(0) > 0
+    zero = ~np.any(sparse.targets != 0, axis=2)  # [K, V]
+    assert zero[:, ~moving].all()  # vertices that never move are in no target
+    assert zero.mean() > 0.2 and zero.mean() > (~np.any(dense.targets != 0, axis=2)).mean()
+
+
+def test_all_targets_refused_for_a_long_clip_and_k_suggested():
+    long = rig_clip(pca.MAX_FRAME_TARGETS + 20)
+    with pytest.raises(FacegenError) as info:
+        pca.morph_basis(long, "all")
+    message = str(info.value)
+    assert f"at most {pca.MAX_FRAME_TARGETS} frames" in message and f"has {long.num_frames}" in message
+    suggested = int(message.split("--morph-targets ")[1].split()[0])
+    assert suggested == pca.morph_basis(long, None).k
+
+
+def test_parse_morph_targets():
+    assert gltf.parse_morph_targets(None) is None and gltf.parse_morph_targets("ALL") == "all"
+    assert gltf.parse_morph_targets("12") == 12
+    for bad in ("abc", "0", "-3", "2.5"):
+        with pytest.raises(FacegenError, match="morph-targets"):
+            gltf.parse_morph_targets(bad)
+
+
+# ---- the writer ------------------------------------------------------------------------------------------
+
+
+def test_glb_layout(clip, tmp_path):
+    out = tmp_path / "line.glb"
+    files = write_animation(clip, out)
+    assert files == [out, tmp_path / "line.wav"]
+    assert out.read_bytes()[:4] == b"glTF"
+    doc = _doc(out)
+    info = doc.asset.extras["facegen"]
+    assert info["fps"] == 25.0 and info["frames"] == clip.num_frames and info["tolerance"] == pca.DEFAULT_TOLERANCE
+    assert 0 < info["reconstructionError"] <= pca.DEFAULT_TOLERANCE
+    assert info["metadata"] == {"speaker": "test", "seed": 0}
+    mesh = doc.meshes[0]
+    prim = mesh.primitives[0]
+    K = info["morphTargets"]
+    assert len(prim.targets) == K == len(mesh.extras["targetNames"]) == len(mesh.weights)
+    for index in [prim.attributes.POSITION] + [t["POSITION"] for t in prim.targets]:
+        assert len(doc.accessors[index].min) == 3 and len(doc.accessors[index].max) == 3
+    assert doc.accessors[prim.indices].componentType == gltf.UNSIGNED_SHORT
+    sampler = doc.animations[0].samplers[0]
+    assert sampler.interpolation == "LINEAR"
+    times = doc.accessors[sampler.input]
+    assert times.count == clip.num_frames and times.min == [0.0]
+    assert times.max[0] == pytest.approx((clip.num_frames - 1) / 25.0)
+    channel = doc.animations[0].channels[0]
+    assert channel.target.path == "weights" and channel.target.node == 0
+    assert doc.nodes[0].scale == [gltf.DEFAULT_METERS_PER_UNIT] * 3
+    # the audio: KHR_audio_emitter, optional, MP3 in a bufferView, one global emitter on the scene
+    assert doc.extensionsUsed == ["KHR_audio_emitter"] and not doc.extensionsRequired
+    ext = doc.extensions["KHR_audio_emitter"]
+    assert ext["audio"][0]["mimeType"] == "audio/mpeg" and isinstance(ext["audio"][0]["bufferView"], int)
+    assert ext["emitters"] == [{"name": "speech", "type": "global", "gain": 1.0, "sources": [0]}]
+    assert doc.scenes[0].extensions["KHR_audio_emitter"]["emitters"] == [0]
+    assert info["audio"]["delayCompensated"] == mp3.measured_delay(16000, 32) > 0
+
+
+def test_glb_reads_back_within_stated_error(clip, tmp_path):
+    out = tmp_path / "line.glb"
+    write_animation(clip, out)
+    back = read_animation(out)
+    doc = _doc(out)
+    stated = doc.asset.extras["facegen"]["reconstructionErrorUnits"]
+    assert back.vertices.shape == clip.vertices.shape and back.fps == 25.0
+    assert np.array_equal(back.faces, clip.faces)
+    error = float(np.linalg.norm(back.vertices - clip.vertices, axis=2).max())
+    assert error <= stated * (1 + 1e-5) + 1e-7 and error <= pca.DEFAULT_TOLERANCE * clip.size
+    assert np.allclose(back.audio, clip.audio, atol=1 / 32767)  # from the WAV sidecar
+    decoded = gltf.decode(out)
+    assert decoded["weights"].min() >= 0 and decoded["weights"].max() <= 1
+
+
+def test_gltf_with_bin_equals_glb(clip, tmp_path):
+    write_animation(clip, tmp_path / "a.glb", morph_targets=6)
+    files = write_animation(clip, tmp_path / "b.gltf", morph_targets=6)
+    assert files == [tmp_path / "b.gltf", tmp_path / "b.bin", tmp_path / "b.wav"]
+    assert json.loads((tmp_path / "b.gltf").read_text())["buffers"][0]["uri"] == "b.bin"
+    a, b = read_animation(tmp_path / "a.glb"), read_animation(tmp_path / "b.gltf")
+    assert np.array_equal(a.vertices, b.vertices) and gltf.decode(tmp_path / "b.gltf")["targets"].shape[0] == 6
+
+
+def test_all_targets_are_exact(clip, tmp_path):
+    write_animation(clip, tmp_path / "all.glb", morph_targets="all", write_audio=False)
+    assert not (tmp_path / "all.wav").exists()
+    back = read_animation(tmp_path / "all.glb")
+    assert gltf.decode(tmp_path / "all.glb")["targets"].shape[0] == clip.num_frames
+    assert np.abs(back.vertices - clip.vertices).max() < 1e-6
+
+
+def test_mp3_is_in_sync_with_the_motion(clip, tmp_path):
+    """Decoded with two different decoders, the embedded MP3 lines up with the clip's audio to a sample
+    or two (the encoder delay, measured at ~1105 samples, is removed) and lasts its duration."""
+    out = tmp_path / "sync.glb"
+    write_animation(clip, out)
+    data = gltf.GltfFile(out).mp3_audio()
+    assert data[:2] in (b"\xff\xf3", b"\xff\xfb") and b"Xing" not in data[:1000] and b"Info" not in data[:1000]
+    decoded, rate = mp3.decode(data)
+    assert rate == clip.sample_rate
+    import imageio_ffmpeg
+
+    ffmpeg = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-i", "pipe:0",
+                             "-f", "f32le", "-ac", "1", "pipe:1"], input=data, capture_output=True, check=True).stdout
+    for samples in (decoded, np.frombuffer(ffmpeg, np.float32)):
+        lag = mp3.lag(samples, clip.audio)
+        assert abs(lag) <= 2, f"MP3 is {lag} samples off"
+        assert abs(len(samples) / rate - clip.duration) <= 1 / clip.fps + 1152 / rate
+    delay = mp3.measured_delay(16000, 32)
+    assert 1000 < delay < 1300  # LAME 576 + decoder 529 = 1105
+    raw = mp3._lame(clip.audio, 16000, 32)  # without the compensation the sound is late by that delay
+    assert mp3.lag(mp3.decode(raw)[0], clip.audio) == delay
+
+
+def test_mp3_resamples_rates_mp3_cannot_store():
+    audio = np.sin(np.arange(19000) / 19000 * 2 * np.pi * 440).astype(np.float32)
+    data, info = mp3.encode(audio, 19000)
+    assert info["sampleRate"] == 22050 and mp3.decode(data)[1] == 22050
+
+
+def test_bad_input_writes_nothing(clip, tmp_path):
+    broken = Animation(vertices=clip.vertices.copy(), faces=clip.faces, fps=25.0, template=clip.template,
+                       audio=clip.audio)
+    broken.vertices[3, 10, 1] = np.nan
+    with pytest.raises(FacegenError, match="NaN"):
+        write_animation(broken, tmp_path / "x.glb")
+    with pytest.raises(FacegenError, match="morph-targets"):
+        write_animation(clip, tmp_path / "y.gltf", morph_targets="lots")
+    with pytest.raises(FacegenError) as info:
+        write_animation(clip, tmp_path / "z.fbx")
+    assert ".glb" in str(info.value) and ".gltf" in str(info.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---- validate ----------------------------------------------------------------------------------------------
+
+
+def test_validate_glb_passes_khronos_and_every_check(clip, tmp_path):
+    _node_ready()
+    from facegen.mesh import Mesh
+    from facegen.validate import validate
+
+    out = tmp_path / "v.glb"
+    write_animation(clip, out)
+    np.save(tmp_path / "source.npy", clip.vertices.reshape(clip.num_frames, -1))
+    template = Mesh(clip.template, clip.faces)
+    report = validate(out, template=template, fps=25.0, reference=tmp_path / "source.npy")
+    assert report.ok, report.to_text()
+    names = {c.name for c in report.checks}
+    assert {"gltf-validator", "time samples", "reconstruction", "audio sync", "embedded audio duration"} <= names
+    assert "0 errors" in report.check("gltf-validator").detail
+    assert "against the reference" in report.check("reconstruction").detail
+    # a reference the file does not reproduce fails the reconstruction check
+    moved = clip.vertices.copy()
+    moved[:, :, 1] += 0.01 * clip.size
+    np.save(tmp_path / "other.npy", moved.reshape(clip.num_frames, -1))
+    bad = validate(out, template=template, reference=tmp_path / "other.npy")
+    assert not bad.ok and [c.name for c in bad.failures] == ["reconstruction"]
+
+
+def test_validate_without_node_says_how_to_install(clip, tmp_path, monkeypatch):
+    from facegen.validate import validate
+
+    out = tmp_path / "n.glb"
+    write_animation(clip, out)
+    monkeypatch.setenv("PATH", str(tmp_path))  # no node on PATH
+    report = validate(out)
+    check = report.check("gltf-validator")
+    assert not check.ok and "make node-deps" in check.detail and "Node.js" in check.detail
+    assert [c.name for c in report.failures] == ["gltf-validator"]  # every other check ran and passed
+    assert len(report.checks) >= 12
+
+
+def test_validator_script_without_the_package(tmp_path):
+    if not shutil.which("node"):
+        pytest.skip("node is not installed")
+    from facegen.validate_gltf import SCRIPT, run_gltf_validator
+
+    lonely = tmp_path / "gltf_validate.js"
+    shutil.copy(SCRIPT, lonely)
+    (tmp_path / "a.glb").write_bytes(b"glTF")
+    result, why = run_gltf_validator(tmp_path / "a.glb", script=lonely)
+    assert result is None and "gltf-validator" in why and "make node-deps" in why
+
+
+def test_validator_catches_a_broken_file(clip, tmp_path):
+    _node_ready()
+    from facegen.validate import validate
+
+    out = tmp_path / "b.glb"
+    write_animation(clip, out, morph_targets=3, write_audio=False)
+    doc = _doc(out)
+    doc.accessors[0].max = [0.0, 0.0, 0.0]  # POSITION max that the data exceed
+    doc.save_binary(str(out))
+    report = validate(out, require_audio=False)
+    assert not report.ok
+    assert "ACCESSOR_MAX_MISMATCH" in {c.name.removeprefix("gltf:") for c in report.failures}
+
+
+@pytest.mark.slow
+def test_sixty_seconds_fit_in_five_megabytes(tmp_path):
+    anim = rig_clip(1500)
+    files = write_animation(anim, tmp_path / "minute.glb")
+    size = files[0].stat().st_size
+    assert size <= 5_000_000, f"{size} bytes"
+    info = _doc(files[0]).asset.extras["facegen"]
+    assert info["reconstructionError"] <= pca.DEFAULT_TOLERANCE
