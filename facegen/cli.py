@@ -58,7 +58,7 @@ def cli(debug: bool) -> None:
               help="A face mesh (PLY/OBJ) with the model's topology to animate instead of its template.")
 @click.option("--text-model", help="Local folder (or cached id) of the text model, if not where the bundle says.")
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
-              help="Output file: .usda .usdc .usd .npy (and more, see README).")
+              help="Output file: .usda .usdc .usd .usdz .glb .gltf .npy.")
 @click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
               help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
 @click.option("--morph-targets", metavar="K|all",
@@ -192,8 +192,10 @@ def info(bundle, as_json):
 @click.option("--audio", "audio_path", type=click.Path(dir_okay=False),
               help="The audio the animation must match (default: the file's own/sidecar audio).")
 @click.option("--no-audio-required", is_flag=True, help="Do not fail when no audio is attached.")
+@click.option("--reference", type=click.Path(dir_okay=False),
+              help="The source animation (.npy/.usd*) that a glTF/blendshape file must reproduce within its tolerance.")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable report.")
-def validate(file, model, template, fps, audio_path, no_audio_required, as_json):
+def validate(file, model, template, fps, audio_path, no_audio_required, reference, as_json):
     """Check an animation FILE written by facegen (or another tool). Exit 1 when a check fails."""
     from facegen.validate import validate as run
 
@@ -208,7 +210,8 @@ def validate(file, model, template, fps, audio_path, no_audio_required, as_json)
         from facegen.mesh import read_mesh
 
         mesh = read_mesh(template)
-    report = run(file, template=mesh, fps=fps, audio_path=audio_path, require_audio=not no_audio_required)
+    report = run(file, template=mesh, fps=fps, audio_path=audio_path, require_audio=not no_audio_required,
+                 reference=reference)
     click.echo(report.to_json() if as_json else report.to_text())
     sys.exit(0 if report.ok else 1)
 

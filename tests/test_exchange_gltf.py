@@ -332,3 +332,15 @@ def test_sixty_seconds_fit_in_five_megabytes(tmp_path):
     assert size <= 5_000_000, f"{size} bytes"
     info = _doc(files[0]).asset.extras["facegen"]
     assert info["reconstructionError"] <= pca.DEFAULT_TOLERANCE
+
+
+def test_input_audio_beside_the_output_is_kept(clip, tmp_path):
+    """`facegen animate clip.wav -o clip.glb`: the input WAV is the sidecar's name; it is not rewritten."""
+    import soundfile as sf
+
+    source = tmp_path / "clip.wav"
+    sf.write(source, clip.audio, clip.sample_rate, subtype="FLOAT")
+    before = source.read_bytes()
+    files = write_animation(clip, tmp_path / "clip.glb", audio_source=source)
+    assert files[0] == tmp_path / "clip.glb" and source.read_bytes() == before
+    assert gltf.GltfFile(tmp_path / "clip.glb").mp3_audio() is not None

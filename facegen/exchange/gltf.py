@@ -74,13 +74,15 @@ def write(
     path: str | os.PathLike,
     *,
     morph_targets: int | str | None = None,
-    tolerance: float = DEFAULT_TOLERANCE,
+    tolerance: float | None = None,
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
     write_audio: bool = True,
+    audio_source: str | os.PathLike | None = None,
 ) -> list[Path]:
     """Write `anim` as .glb or .gltf (+ .bin) with its audio embedded and as a WAV sidecar.
 
-    `morph_targets`: None (fewest targets within `tolerance` x face size), a number, or "all".
+    `morph_targets`: None (fewest targets within `tolerance` x face size; default tolerance 1e-3), a
+    number, or "all". `audio_source`: the input audio file, kept (not overwritten) when it is the sidecar.
     Returns the files written: the glTF file, then the .bin (for .gltf), then the WAV (with audio).
     """
     from facegen.exchange import check_animation
@@ -92,16 +94,15 @@ def write(
         raise FacegenError(f"{path} is not a glTF file name: use .glb or .gltf")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
+    tolerance = DEFAULT_TOLERANCE if tolerance is None else float(tolerance)
     basis = morph_basis(anim, parse_morph_targets(morph_targets), tolerance, unit_weights=True, sparse=True)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     sound = mp3.encode(audio, anim.sample_rate) if audio is not None else None
     bin_path = path.with_suffix(".bin")
-    if suffix == ".gltf" and bin_path == sidecar_path(path):  # cannot happen, but be explicit
-        raise FacegenError(f"{path}: the buffer and the audio sidecar would share a name")
     gltf, blob = build(anim, basis, sound, meters_per_unit, wav_name=sidecar_path(path).name if sound else None)
     bin_placed = False
     try:
-        with atomic_with_sidecar(path, audio, anim.sample_rate) as (tmp, wav):
+        with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
             if suffix == ".glb":
                 _save_glb(gltf, blob, tmp)
             else:
