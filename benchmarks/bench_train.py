@@ -11,10 +11,17 @@ fused Adam).
     python benchmarks/bench_train.py                 # 1 warm-up step, then 1 timed epoch on 2 threads
     python benchmarks/bench_train.py --epochs 2 --threads 1 --modalities audio
 
-Prints seconds per epoch and sequences per second (target: <= 60 s per epoch on 2 CPU cores).
+Prints seconds per epoch and sequences per second (target: <= 60 s per epoch on 2 CPU cores), the time
+to write one checkpoint, and the load average before and after: on a machine shared with other jobs the
+numbers are not comparable. OpenMP threads wait passively (OMP_WAIT_POLICY=PASSIVE unless set): with
+spinning threads, a 2-thread run on 2 busy cores was 3-5x slower than a 1-thread run.
 """
 
 from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch loads its OpenMP runtime
 
 import argparse
 import tempfile
@@ -26,7 +33,7 @@ import torch
 
 from facegen.data import Item, Sequence
 from facegen.model import FaceModel, ModelConfig
-from facegen.train import _Batch, _torch_settings, epoch_order, train_epoch
+from facegen.train import CHECKPOINT, Batch, epoch_order, save_checkpoint, torch_settings, train_epoch
 
 BIWI_VERTICES = 23370
 
@@ -63,13 +70,14 @@ def main() -> None:
     ap.add_argument("--files", type=int, default=16, help="distinct target .npy files on disk")
     args = ap.parse_args()
 
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="facegen-bench-") as tmp:
         t0 = time.perf_counter()
         items = make_items(Path(tmp), args.sequences, args.vertices, args.text_dim, args.files, seed=0)
         frames = sum(it.num_frames for it in items)
         print(f"data: {len(items)} sequences, {frames} frames (mean {frames / len(items) / 25:.2f} s), "
               f"{args.vertices} vertices; made in {time.perf_counter() - t0:.1f} s")
-        with _torch_settings(args.threads):
+        with torch_settings(args.threads):
             torch.manual_seed(0)
             cfg = ModelConfig(num_vertices=args.vertices, num_speakers=6, text_dim=args.text_dim,
                               modalities=args.modalities, fusion=args.fusion)
@@ -78,7 +86,7 @@ def main() -> None:
                   f"parameters; torch {torch.__version__}, {torch.get_num_threads()} threads")
             optimizer = torch.optim.Adam(model.parameters(), lr=1e-4, fused=True)
             device = torch.device("cpu")
-            batches = [_Batch(it, i % 6, 6, device) for i, it in enumerate(items)]
+            batches = [Batch(it, i % 6, 6, device) for i, it in enumerate(items)]
             train_epoch(model, optimizer, batches, [0, 1])  # warm-up: allocations, oneDNN kernels
             times = []
             for epoch in range(args.epochs):
@@ -87,7 +95,15 @@ def main() -> None:
                 times.append(time.perf_counter() - t0)
                 print(f"epoch {epoch + 1}: {times[-1]:.1f} s, {len(batches) / times[-1]:.2f} sequences/s, "
                       f"{frames / times[-1]:.0f} frames/s, loss {loss:.3e}")
+            t0 = time.perf_counter()
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            save_checkpoint(Path(tmp) / CHECKPOINT, model, best_state, optimizer, {"epoch": args.epochs})
+            print(f"checkpoint: {time.perf_counter() - t0:.1f} s "
+                  f"({(Path(tmp) / CHECKPOINT).stat().st_size / 1e6:.0f} MB)")
         best = min(times)
+        load_after = os.getloadavg()
+        print(f"load average (1 min) {load_before[0]:.1f} before, {load_after[0]:.1f} after, on "
+              f"{os.cpu_count()} CPUs; OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
         print(f"seconds/epoch {best:.1f}  sequences/s {len(batches) / best:.2f}  "
               f"({'within' if best <= 60 else 'OVER'} the 60 s target)")
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from facegen.animation import Animation
 from facegen.audio import check_speech, load_audio, mel_features, num_frames
 from facegen.bundle import Bundle, load_bundle
 from facegen.errors import FacegenError
+from facegen.inference import PROFILE, FrameStream, predict_frames, select_device
 from facegen.mesh import Mesh, check_topology, read_mesh
 
 Progress = Callable[[str], None]
@@ -56,22 +58,93 @@ def resolve_template(bundle: Bundle, template: str | os.PathLike | Mesh | None) 
     return Mesh(mesh.vertices, bundle.template.faces, bundle.template.regions)
 
 
-def predict_offsets(bundle: Bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int) -> np.ndarray:
-    """Run the network: mel [T,n_mels], text [T,D] or None → offsets [T,V,3] float32."""
-    import torch
+@dataclass
+class Clip:
+    """A clip's network inputs and what its Animation needs, before inference."""
 
-    from facegen.model import one_hot
+    audio_name: str
+    samples: np.ndarray
+    sample_rate: int
+    mel: np.ndarray  # [T, n_mels]
+    text_features: np.ndarray | None  # [T, text_dim] or None (no text)
+    words: list
+    word_timing: str
+    speaker: int
+    mesh: Mesh
 
-    cfg = bundle.config
-    with torch.inference_mode():
-        mel_t = torch.from_numpy(mel)[None]
-        text_t = None
-        if cfg.uses_text:
-            if text is None:
-                text = np.zeros((mel.shape[0], cfg.text_dim), np.float32)
-            text_t = torch.from_numpy(np.ascontiguousarray(text, np.float32))[None]
-        out = bundle.model(mel_t, text_t, one_hot(speaker, cfg.num_speakers))
-    return out[0].numpy()
+    @property
+    def num_frames(self) -> int:
+        return int(self.mel.shape[0])
+
+
+def prepare_clip(
+    audio: str | os.PathLike,
+    *,
+    bundle: Bundle,
+    text: str | None = None,
+    alignment: str | os.PathLike | None = None,
+    no_text: bool = False,
+    speaker: str | int | None = None,
+    template: str | os.PathLike | Mesh | None = None,
+    text_model: str | None = None,
+    progress: Progress = _quiet,
+    warn: Progress = _quiet,
+) -> Clip:
+    """Everything before the network: audio, word timings, text and audio features (see `animate`)."""
+    spk = bundle.speaker_index(speaker)
+    mesh = resolve_template(bundle, template)
+    with PROFILE.stage("audio"):
+        samples, sr = load_audio(audio)
+    cfg = bundle.features
+    check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
+    T = num_frames(len(samples) / sr, cfg.fps)
+    if len(samples) / sr < LONG_INPUT_SECONDS:
+        progress = _quiet
+
+    words: list = []
+    source = "none (--no-text)"
+    text_feats = None
+    if bundle.config.uses_text and not no_text:
+        with PROFILE.stage("alignment"):
+            words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress, warn=warn)
+        from facegen.text import load_text_backend, text_features
+
+        progress(f"text features ({bundle.text_backend}) for {len(words)} words")
+        with PROFILE.stage("text_model_load"):
+            backend = load_text_backend(bundle.text_backend, text_model)
+        if backend.dim != bundle.config.text_dim:
+            raise FacegenError(
+                f"text model {backend.id} gives {backend.dim}-d features but the model was trained on "
+                f"{bundle.config.text_dim}-d ({bundle.text_backend}): pass the matching --text-model"
+            )
+        with PROFILE.stage("text_features"):
+            text_feats = text_features(words, backend, T, cfg.fps)
+
+    progress(f"audio features and inference for {T} frames")
+    with PROFILE.stage("audio_features"):
+        mel = mel_features(samples, sr, cfg, bundle.mel_filters)
+    return Clip(Path(audio).name, samples, sr, mel, text_feats, words, source, spk, mesh)
+
+
+def finish_animation(bundle: Bundle, clip: Clip, vertices: np.ndarray | FrameStream) -> Animation:
+    """The Animation of a prepared clip with its computed frames (an array or a FrameStream)."""
+    return Animation(
+        vertices=vertices,
+        faces=clip.mesh.faces,
+        fps=bundle.features.fps,
+        template=clip.mesh.vertices,
+        audio=clip.samples,
+        sample_rate=clip.sample_rate,
+        regions=dict(clip.mesh.regions),
+        metadata={
+            "source_audio": clip.audio_name,
+            "model": bundle.path.name if bundle.path else "in-memory",
+            "model_fingerprint": bundle.fingerprint,
+            "speaker": bundle.speakers[clip.speaker],
+            "words": [{"word": w.text, "start": round(w.start, 4), "end": round(w.end, 4)} for w in clip.words],
+            "word_timing": clip.word_timing,
+        },
+    )
 
 
 def animate(
@@ -84,6 +157,8 @@ def animate(
     bundle: Bundle | str | os.PathLike | None = None,
     template: str | os.PathLike | Mesh | None = None,
     text_model: str | None = None,
+    device: str = "auto",
+    stream: bool = False,
     progress: Progress = _quiet,
     warn: Progress = _quiet,
 ) -> Animation:
@@ -91,54 +166,23 @@ def animate(
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
     recognition; `no_text=True` feeds zero text features instead. `bundle` is a loaded Bundle or a path
-    (None: the built-in default model). `progress` receives stage messages for long clips (≥ 20 s),
-    `warn` receives notes the user should always see.
+    (None: the built-in default model). `device` is "auto" (a CUDA GPU when torch sees one, else the
+    CPU, noted through `progress`), "cpu" or "cuda" (a FacegenError without a GPU).
+    With `stream=True` the Animation's vertices are a FrameStream, computed block by block as a writer
+    reads them (bounded memory for long clips); otherwise a [T, V, 3] float32 array.
+    `progress` receives stage messages for long clips (>= 20 s), `warn` receives notes the user should
+    always see.
     """
+    PROFILE.mark("animate_start")
+    dev = select_device(device, progress)
     if not isinstance(bundle, Bundle):
-        bundle = load_bundle(bundle)
-    spk = bundle.speaker_index(speaker)
-    mesh = resolve_template(bundle, template)
-    samples, sr = load_audio(audio)
-    cfg = bundle.features
-    check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
-    T = num_frames(len(samples) / sr, cfg.fps)
-    if len(samples) / sr < LONG_INPUT_SECONDS:
-        progress = _quiet
-
-    words: list = []
-    source = "none (--no-text)"
-    text_feats = None
-    if bundle.config.uses_text and not no_text:
-        words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress, warn=warn)
-        from facegen.text import load_text_backend, text_features
-
-        progress(f"text features ({bundle.text_backend}) for {len(words)} words")
-        backend = load_text_backend(bundle.text_backend, text_model)
-        if backend.dim != bundle.config.text_dim:
-            raise FacegenError(
-                f"text model {backend.id} gives {backend.dim}-d features but the model was trained on "
-                f"{bundle.config.text_dim}-d ({bundle.text_backend}): pass the matching --text-model"
-            )
-        text_feats = text_features(words, backend, T, cfg.fps)
-
-    progress(f"audio features and inference for {T} frames")
-    mel = mel_features(samples, sr, cfg, bundle.mel_filters)
-    offsets = predict_offsets(bundle, mel, text_feats, spk)
-    vertices = mesh.vertices[None].astype(np.float32) + offsets
-    return Animation(
-        vertices=vertices,
-        faces=mesh.faces,
-        fps=cfg.fps,
-        template=mesh.vertices,
-        audio=samples,
-        sample_rate=sr,
-        regions=dict(mesh.regions),
-        metadata={
-            "source_audio": Path(audio).name,
-            "model": bundle.path.name if bundle.path else "in-memory",
-            "model_fingerprint": bundle.fingerprint,
-            "speaker": bundle.speakers[spk],
-            "words": [{"word": w.text, "start": round(w.start, 4), "end": round(w.end, 4)} for w in words],
-            "word_timing": source,
-        },
-    )
+        with PROFILE.stage("model_load"):
+            bundle = load_bundle(bundle)
+    clip = prepare_clip(audio, bundle=bundle, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
+                        template=template, text_model=text_model, progress=progress, warn=warn)
+    with PROFILE.stage("inference"):
+        frames = predict_frames(bundle, clip.mel, clip.text_features, clip.speaker,
+                                template=clip.mesh.vertices, device=dev)
+        vertices = frames if stream else np.asarray(frames)
+    PROFILE.mark("animate_end")
+    return finish_animation(bundle, clip, vertices)

@@ -68,9 +68,11 @@ def cli(debug: bool) -> None:
               help="glTF / USD blendshapes: largest vertex error allowed, as a fraction of the face size "
                    "(default 1e-3).")
 @click.option("--preview", type=click.Path(dir_okay=False), help="Also render a preview video (.mp4) with sound.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
+              help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, usd_mode,
-            morph_targets, tolerance, preview, quiet):
+            morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.animate import animate as run
     from facegen.atomic import check_writable
@@ -88,7 +90,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         check_output(preview)
     progress = _progress(quiet)
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
-               bundle=model, template=template, text_model=text_model, progress=progress,
+               bundle=model, template=template, text_model=text_model, device=device, progress=progress,
                warn=_progress(False))
     written = write_animation(anim, output, audio_source=audio, **options)
     progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
@@ -214,6 +216,126 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
                  reference=reference)
     click.echo(report.to_json() if as_json else report.to_text())
     sys.exit(0 if report.ok else 1)
+
+
+def _split_options(f):
+    for opt in reversed([
+        click.option("--train-subjects", help="Training subjects, e.g. F2,F3,F4,M3,M4,M5 (the default)."),
+        click.option("--test-subjects", help="Test-B subjects (default: F1,F5,F6,F7,F8,M1,M2,M6)."),
+        click.option("--train-sentences", help="Training sentences, e.g. 1-32 (the default)."),
+        click.option("--val-sentences", help="Validation sentences (default 33-36)."),
+        click.option("--test-sentences", help="Test sentences (default 37-40)."),
+    ]):
+        f = opt(f)
+    return f
+
+
+def _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences):
+    from facegen.data import Splits
+
+    return Splits.from_options(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
+
+
+@cli.command()
+@click.argument("data", type=click.Path(file_okay=False))
+@click.option("--output", "-o", required=True, type=click.Path(dir_okay=False), help="The model bundle to write.")
+@click.option("--text-backend", default="minilm", show_default=True,
+              help="minilm (offline default), gpt2 (the paper's), or a Hugging Face id / local folder.")
+@click.option("--text-model", type=click.Path(), help="Local folder with the text model's weights.")
+@click.option("--modalities", type=click.Choice(["both", "audio", "text"]), default="both", show_default=True)
+@click.option("--fusion", type=click.Choice(["tensor", "concat"]), default="tensor", show_default=True)
+@click.option("--epochs", default=100, show_default=True)
+@click.option("--lr", default=1e-4, show_default=True)
+@click.option("--batch-size", default=1, show_default=True)
+@click.option("--seed", default=0, show_default=True)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--resume", is_flag=True, help="Continue from the last checkpoint (after a kill or with more epochs).")
+@click.option("--checkpoint-dir", type=click.Path(file_okay=False), help="Default: OUTPUT's name + '.ckpt/'.")
+@click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default="fp32", show_default=True,
+              help="How the bundle stores its weights.")
+@_split_options
+@click.option("--quiet", "-q", is_flag=True)
+def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device, resume,
+          checkpoint_dir, precision, train_subjects, test_subjects, train_sentences, val_sentences,
+          test_sentences, quiet):
+    """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
+    from facegen.train import train as run
+
+    splits = _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
+    result = run(data, output, text_backend=text_backend, text_model_path=text_model, modalities=modalities,
+                 fusion=fusion, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, device=device,
+                 resume=resume, splits=splits, checkpoint_dir=checkpoint_dir, precision=precision, quiet=quiet)
+    click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs, "best_epoch": result.best_epoch,
+                           "best_loss": result.best_loss, "seconds": round(result.seconds, 1),
+                           "curves": str(result.curves_csv)}))
+
+
+@cli.command()
+@click.argument("bundle", type=click.Path(dir_okay=False))
+@click.argument("data", type=click.Path(file_okay=False))
+@click.option("--split", type=click.Choice(["test-a", "test-b", "val", "train"]), default="test-a", show_default=True)
+@click.option("--text-model", type=click.Path(), help="Local folder with the text model's weights.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="cpu", show_default=True)
+@_split_options
+@click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
+@click.option("--plots", type=click.Path(file_okay=False),
+              help="Also write the paper's analysis figures (PNG) into this folder.")
+@click.option("--quiet", "-q", is_flag=True)
+def evaluate(bundle, data, split, text_model, device, train_subjects, test_subjects, train_sentences,
+             val_sentences, test_sentences, as_json, plots, quiet):
+    """Evaluate a model BUNDLE on a split of the dataset DATA: LVE, FDD, vertex errors."""
+    from facegen.evaluate import evaluate as run
+    from facegen.evaluate import format_table
+
+    given = (train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
+    splits = _splits(*given) if any(v is not None for v in given) else None
+    result = run(bundle, data, split, splits=splits, text_model_path=text_model, device=device, quiet=quiet)
+    click.echo(json.dumps(result, indent=1) if as_json else format_table(result))
+    if plots:
+        from facegen.plots import write_plots
+
+        for path in write_plots(bundle, data, plots, split=split, splits=splits, text_model_path=text_model):
+            click.echo(f"facegen: wrote {path}", err=True)
+
+
+@cli.group()
+def data():
+    """Datasets: import the raw BIWI release, build the synthetic corpus."""
+
+
+@data.command("import-biwi")
+@click.argument("raw", type=click.Path(file_okay=False))
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--transcripts", type=click.Path(), help="Folder or file with the sentence transcripts.")
+@click.option("--regions", type=click.Path(file_okay=False), help="Folder with lve.txt / fdd.txt region files.")
+@click.option("--subjects", help="Only these subjects, e.g. F1,M2.")
+@click.option("--quiet", "-q", is_flag=True)
+def import_biwi(raw, out, transcripts, regions, subjects, quiet):
+    """Convert the raw BIWI release RAW into the community layout in OUT."""
+    from facegen.data import import_biwi as run
+
+    report = run(raw, out, transcripts=transcripts, regions=regions,
+                 subjects=subjects.split(",") if subjects else None, progress=not quiet)
+    click.echo(report.summary())
+
+
+@data.command("synth")
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--subjects", help="Speakers to generate, e.g. F2,F3 (default: all 14).")
+@click.option("--sentences", help="Sentences, e.g. 1-40 (default: 1-48).")
+@click.option("--preset", type=click.Choice(["paper"]),
+              help="paper: training speakers e01-e48 and test-B speakers e37-e48 only.")
+@click.option("--seed", default=0, show_default=True)
+@click.option("--fps", default=25.0, show_default=True)
+@click.option("--workers", default=2, show_default=True)
+@click.option("--quiet", "-q", is_flag=True)
+def synth(out, subjects, sentences, preset, seed, fps, workers, quiet):
+    """Generate the synthetic speech-and-motion corpus in OUT (BIWI layout)."""
+    from facegen.synth.corpus import synthesize_corpus
+
+    report = synthesize_corpus(out, subjects, sentences, preset=preset, fps=fps, seed=seed, workers=workers,
+                               progress=not quiet)
+    click.echo(report.summary())
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -31,6 +31,7 @@ subject's template is always an error.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -343,6 +344,7 @@ class Dataset:
             raise FacegenError(f"cannot create the cache folder {self.cache_dir} ({exc.strerror}): "
                                "pass --cache-dir to a writable folder") from exc
         self.skipped: list[tuple[str, str]] = []  # (sequence, reason)
+        self._vertex_index_dirty = False
 
     # ------------------------------------------------------------------ static parts
     @cached_property
@@ -477,7 +479,7 @@ class Dataset:
         return _read_json(self.cache_dir / "vertices.json")
 
     def _save_vertex_index(self) -> None:
-        if getattr(self, "_vertex_index_dirty", False):
+        if self._vertex_index_dirty:
             _write_json(self.cache_dir / "vertices.json", self._vertex_index)
             self._vertex_index_dirty = False
 
@@ -495,7 +497,8 @@ class Dataset:
         key = _digest([_stat(seq.wav), _stat(seq.text)])
         cached = self.cache_dir / "alignments" / f"{seq.name}-{key}.json"
         if cached.is_file():
-            return align.read_alignment(cached, duration=duration)
+            with contextlib.suppress(FacegenError):  # a damaged cache entry is recomputed
+                return align.read_alignment(cached, duration=duration)
         if not transcript.strip():
             return []
         words = align.align(samples, sr, transcript)

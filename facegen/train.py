@@ -81,7 +81,7 @@ def resolve_device(device: str, say: Warn) -> torch.device:
 
 
 @contextlib.contextmanager
-def _torch_settings(threads: int | None) -> Iterator[None]:
+def torch_settings(threads: int | None) -> Iterator[None]:
     """Deterministic algorithms, flushed denormals and the thread count, restored afterwards."""
     deterministic = torch.are_deterministic_algorithms_enabled()
     warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
@@ -109,7 +109,7 @@ def _round_robin(names: list, key) -> list:
     return out
 
 
-class _Batch:
+class Batch:
     """One sequence's tensors on the device (features kept; the target is read per step)."""
 
     def __init__(self, item: Item, speaker: int, num_speakers: int, device: torch.device) -> None:
@@ -143,7 +143,7 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
     return np.random.default_rng([seed, epoch]).permutation(n)
 
 
-def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: list[_Batch], order,
+def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: list[Batch], order,
                 batch_size: int = 1, bar=None) -> float:
     """One pass over `batches` in `order`, one optimizer step per `batch_size` sequences; the mean loss.
 
@@ -170,7 +170,7 @@ def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: lis
     return total / max(len(order), 1)
 
 
-def _validate(model: FaceModel, batches: list[_Batch]) -> float:
+def _validate(model: FaceModel, batches: list[Batch]) -> float:
     if not batches:
         return float("nan")
     model.eval()
@@ -375,7 +375,7 @@ def train(
         "val": [it.name for it in val_items],
     }
 
-    with _torch_settings(threads):
+    with torch_settings(threads):
         torch.manual_seed(seed)
         model = FaceModel(cfg)
         mels = np.concatenate([it.mel for it in train_items]).astype(np.float64)
@@ -413,8 +413,8 @@ def train(
                                "pass --checkpoint-dir to a writable folder") from exc
 
         speaker_of = {s: i for i, s in enumerate(speakers)}
-        train_batches = [_Batch(it, speaker_of[it.subject], len(speakers), dev) for it in train_items]
-        val_batches = [_Batch(it, speaker_of[it.subject], len(speakers), dev) for it in val_items
+        train_batches = [Batch(it, speaker_of[it.subject], len(speakers), dev) for it in train_items]
+        val_batches = [Batch(it, speaker_of[it.subject], len(speakers), dev) for it in val_items
                        if it.subject in speaker_of]
         say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
             f"{len(val_batches)}, {epochs} epochs, device {dev}")

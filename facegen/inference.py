@@ -1,0 +1,491 @@
+"""Inference: the network on a clip's features — device choice, bounded-memory forward, frame streams,
+batches of clips.
+
+Where the memory goes: per frame the network carries 128 mel bands, 384 text features, 8,385 fused
+features and 256 decoder states, but outputs 3V = 70,110 numbers. A 10-minute clip (15,000 frames) has
+4.2 GB of output and only 15 MB of decoder states. So the forward runs in two parts:
+
+1. `decoder_states`: the encoders (convolutions, text LSTM) and the decoder BiLSTMs run over the whole
+   clip at once, exactly as in one pass (no seams: every recurrence sees the whole clip); the only wide
+   step, tensor fusion + the decoder's first FC, runs in blocks of frames. Memory O(T x 256).
+2. `FrameStream`: the output layer, frames = states @ W.T + (bias + template), computed block by block
+   when a writer asks for frames (`blocks()`, indexing) into float32 arrays, with the template added in
+   the same pass. Memory: one block (256 frames = 72 MB) at a time.
+
+On the CPU the output layer runs through numpy's BLAS (OpenBLAS): on the AMD EPYC this was measured on it
+is about twice as fast as torch's MKL sgemm for this shape (benchmarks/RESULTS.md). On CUDA both parts
+run on the GPU and blocks are copied back.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from facegen.errors import FacegenError
+
+DEVICES = ("auto", "cpu", "cuda")
+BLOCK_FRAMES = 256  # frames per output block (256 x 70,110 float32 = 72 MB)
+FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
+Say = Callable[[str], None]
+
+
+def _silent(_: str) -> None:
+    pass
+
+
+# --------------------------------------------------------------------------------------------------
+# profiling: FACEGEN_PROFILE=1 prints each stage's seconds as JSON on stderr when the process exits
+
+
+class _Profile:
+    """Stage timings of this process, enabled by the FACEGEN_PROFILE environment variable."""
+
+    def __init__(self) -> None:
+        self.enabled = os.environ.get("FACEGEN_PROFILE", "") not in ("", "0")
+        self.stages: dict[str, float] = {}
+        self.marks: dict[str, float] = {}
+        self._registered = False
+
+    def mark(self, name: str) -> None:
+        """Record the wall-clock time (time.time()) of an event, e.g. "animate_start"."""
+        if self.enabled:
+            self.marks[name] = time.time()
+            self._register()
+
+    def add(self, name: str, seconds: float) -> None:
+        if self.enabled:
+            self.stages[name] = self.stages.get(name, 0.0) + seconds
+            self._register()
+
+    def stage(self, name: str):
+        return _Stage(self, name)
+
+    def _register(self) -> None:
+        if not self._registered:
+            import atexit
+
+            atexit.register(self.report)
+            self._registered = True
+
+    def report(self) -> None:
+        end = time.time()
+        stages = dict(self.stages)
+        if "animate_end" in self.marks:  # the CLI writes the asset after animate() returns
+            stages["writing"] = end - self.marks["animate_end"]
+        payload = {"facegen_profile": {k: round(v, 4) for k, v in stages.items()},
+                   "marks": self.marks, "exit": end}
+        try:
+            import resource
+
+            payload["max_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+        except ImportError:  # not on Windows
+            pass
+        sys.stderr.write(json.dumps(payload) + "\n")
+        sys.stderr.flush()
+
+
+class _Stage:
+    def __init__(self, profile: _Profile, name: str) -> None:
+        self.profile, self.name = profile, name
+
+    def __enter__(self) -> None:
+        self.start = time.perf_counter()
+
+    def __exit__(self, *exc) -> None:
+        self.profile.add(self.name, time.perf_counter() - self.start)
+
+
+PROFILE = _Profile()
+
+
+# --------------------------------------------------------------------------------------------------
+# device
+
+
+def select_device(device: str = "auto", say: Say = _silent, task: str = "inference"):
+    """The torch device for `device`: "cpu", "cuda" (or "cuda:N") or "auto" (cuda when torch sees a GPU).
+
+    "auto" without a GPU runs on the CPU and says so through `say`; an explicit "cuda" without one is a
+    FacegenError (the CLI exits 2).
+    """
+    import torch
+
+    name = str(device).strip().lower()
+    if name not in DEVICES and not name.startswith("cuda:"):
+        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda")
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda")
+        say(f"no CUDA GPU available: running {task} on the CPU")
+        return torch.device("cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise FacegenError(f"--device {name} was asked for but torch sees no CUDA GPU: use --device cpu (or auto)")
+    return torch.device(name)
+
+
+def _model_on(bundle, device):
+    model = bundle.model
+    if next(model.parameters()).device != device:
+        model.to(device)
+    return model
+
+
+# --------------------------------------------------------------------------------------------------
+# the network in two parts
+
+
+def decoder_states(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *, device=None,
+                   fusion_frames: int = FUSION_FRAMES):
+    """The decoder BiLSTM's states for one clip, [T, 2 * lstm_dim] float32 torch tensor on `device`.
+
+    `mel` [T, n_mels], `text` [T, text_dim] or None (zeros when the model uses text). Equal to the states
+    of a one-pass forward: only the per-frame fusion and decoder FC run in blocks of `fusion_frames`.
+    """
+    return batch_decoder_states(bundle, [(mel, text, speaker)], device=device, fusion_frames=fusion_frames)[0]
+
+
+def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | None, int]], *, device=None,
+                         fusion_frames: int = FUSION_FRAMES) -> list:
+    """Decoder states for several clips (mel, text, speaker): encoders per clip, the BiLSTMs over one
+    packed batch (each clip sees exactly its own frames, as alone). Returns one [T_i, H] tensor per clip."""
+    import torch
+    from torch.nn.utils.rnn import pack_sequence, unpack_sequence
+
+    from facegen.model import one_hot
+
+    device = torch.device("cpu") if device is None else torch.device(device)
+    model = _model_on(bundle, device)
+    cfg = model.cfg
+    inputs = []
+    with torch.inference_mode():
+        for mel, text, speaker in clips:
+            T = int(mel.shape[0])
+            mel_t = torch.from_numpy(np.ascontiguousarray(mel, np.float32))[None].to(device)
+            text_t = None
+            if cfg.uses_text:
+                if text is None:
+                    text = np.zeros((T, cfg.text_dim), np.float32)
+                if text.shape != (T, cfg.text_dim):
+                    raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
+                text_t = torch.from_numpy(np.ascontiguousarray(text, np.float32))[None].to(device)
+            spk = one_hot(speaker, cfg.num_speakers).to(device)
+            enc = model.encode(mel_t, text_t, spk)
+            x = torch.empty(T, cfg.decoder_dim, device=device)
+            for s in range(0, T, fusion_frames):
+                part = {k: v[:, s:s + fusion_frames] for k, v in enc.items()}
+                x[s:s + fusion_frames] = model.act(model.fc_in(model.fuse(part, spk)))[0]
+            inputs.append(x)
+        if len(inputs) == 1:
+            return [model.lstm(inputs[0][None])[0][0]]
+        packed, _ = model.lstm(pack_sequence(inputs, enforce_sorted=False))
+        return list(unpack_sequence(packed))
+
+
+class FrameStream:
+    """Vertex positions [T, V, 3] float32 computed on demand from decoder states, block by block.
+
+    Behaves like a read-only array for writers: `shape`, `dtype`, `len()`, indexing (`frames[i]`,
+    `frames[a:b]`; frames are computed in blocks and the last block is kept, so reading frames in order
+    costs one matrix product per block) and `np.asarray(frames)` (computes everything: T x V x 12 bytes).
+    `blocks(n)` yields (first frame, [n, V, 3] array) without ever holding more than one block.
+    """
+
+    dtype = np.dtype(np.float32)
+    ndim = 3
+
+    def __init__(self, states, weight, base: np.ndarray, block_frames: int = BLOCK_FRAMES) -> None:
+        import torch
+
+        self._torch = isinstance(states, torch.Tensor) and states.device.type != "cpu"
+        if self._torch:
+            self._states = states.float()
+            self._weight = weight.detach().float()
+            self._base = torch.as_tensor(base.reshape(-1), device=states.device)
+        else:
+            states = states.detach().cpu().numpy() if isinstance(states, torch.Tensor) else states
+            self._states = np.ascontiguousarray(states, np.float32)
+            w = weight.detach().cpu().numpy() if isinstance(weight, torch.Tensor) else weight
+            self._weight = np.asarray(w, np.float32)
+            self._base = np.ascontiguousarray(base, np.float32).reshape(-1)
+        self.num_vertices = int(self._base.shape[0]) // 3
+        self.block_frames = int(block_frames)
+        self._cached: tuple[int, np.ndarray] | None = None
+        self.blocks_computed = 0  # how many output blocks were computed (for tests and profiles)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (int(self._states.shape[0]), self.num_vertices, 3)
+
+    @property
+    def nbytes(self) -> int:
+        return int(np.prod(self.shape)) * 4
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def compute(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Frames start..stop-1 as [n, V, 3] float32 (written into `out` when given)."""
+        n = stop - start
+        if out is None:
+            out = np.empty((n, self.num_vertices, 3), np.float32)
+        flat = out.reshape(n, -1)
+        if self._torch:
+            import torch
+
+            with torch.inference_mode():
+                block = torch.addmm(self._base, self._states[start:stop], self._weight.T)
+            flat[...] = block.cpu().numpy()
+        else:
+            np.matmul(self._states[start:stop], self._weight.T, out=flat)
+            flat += self._base
+        self.blocks_computed += 1
+        return out
+
+    def blocks(self, block_frames: int | None = None, start: int = 0,
+               stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+        """(first frame, frames [n, V, 3]) for consecutive blocks of `block_frames`; each array is new."""
+        size = block_frames or self.block_frames
+        stop = len(self) if stop is None else min(stop, len(self))
+        for s in range(start, stop, size):
+            yield s, self.compute(s, min(s + size, stop))
+
+    def _block_of(self, i: int) -> tuple[int, np.ndarray]:
+        first = (i // self.block_frames) * self.block_frames
+        if self._cached is None or self._cached[0] != first:
+            self._cached = (first, self.compute(first, min(first + self.block_frames, len(self))))
+        return self._cached
+
+    def __getitem__(self, key):
+        rest = ()
+        if isinstance(key, tuple):
+            key, rest = key[0], key[1:]
+        T = len(self)
+        if isinstance(key, int | np.integer):
+            i = int(key) + T if key < 0 else int(key)
+            if not 0 <= i < T:
+                raise IndexError(f"frame {key} is out of range for {T} frames")
+            first, block = self._block_of(i)
+            out = block[i - first]
+        elif isinstance(key, slice):
+            start, stop, step = key.indices(T)
+            out = self.compute(start, max(start, stop))[::step] if step > 0 else np.asarray(self)[key]
+        else:
+            out = np.asarray(self)[key]
+        return out[rest] if rest else out
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for _, block in self.blocks():
+            yield from block
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        out = np.empty(self.shape, np.float32)
+        for s in range(0, len(self), self.block_frames):
+            self.compute(s, min(s + self.block_frames, len(self)), out=out[s:s + self.block_frames])
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def materialize(self) -> np.ndarray:
+        return np.asarray(self)
+
+    def __repr__(self) -> str:
+        return f"FrameStream(shape={self.shape}, block_frames={self.block_frames})"
+
+
+def frame_stream(bundle, states, template: np.ndarray | None = None,
+                 block_frames: int = BLOCK_FRAMES) -> FrameStream:
+    """Frames = template + offsets from decoder `states` (template None: offsets only)."""
+    fc = bundle.model.fc_out
+    base = fc.bias.detach().cpu().numpy().astype(np.float32)
+    if template is not None:
+        base = base + np.asarray(template, np.float32).reshape(-1)
+    return FrameStream(states, fc.weight, base, block_frames)
+
+
+def predict_frames(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *,
+                   template: np.ndarray | None = None, device=None,
+                   block_frames: int = BLOCK_FRAMES) -> FrameStream:
+    """The clip's vertex positions (template + offsets; offsets alone when `template` is None) as a
+    FrameStream: the decoder states are computed now, the output frames when they are read."""
+    states = decoder_states(bundle, mel, text, speaker, device=device)
+    return frame_stream(bundle, states, template, block_frames)
+
+
+def predict_offsets(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *,
+                    device=None) -> np.ndarray:
+    """Run the network: mel [T,n_mels], text [T,D] or None → offsets [T,V,3] float32 (all in memory)."""
+    return np.asarray(predict_frames(bundle, mel, text, speaker, device=device))
+
+
+def prepare_threads() -> None:
+    """Denormals flushed (random-like weights produce them; they slow CPU kernels many times)."""
+    import torch
+
+    torch.set_flush_denormal(True)
+
+
+# --------------------------------------------------------------------------------------------------
+# many clips
+
+
+@dataclass
+class Job:
+    """One clip to animate: the audio, where its words come from, the speaker, the output file."""
+
+    audio: Path
+    output: Path
+    text: str | None = None
+    alignment: Path | None = None
+    speaker: str | None = None
+    no_text: bool = False
+
+
+@dataclass
+class JobResult:
+    job: Job
+    files: list[Path] = field(default_factory=list)
+    error: str | None = None
+    frames: int = 0
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output")
+
+
+def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = None,
+                  default_ext: str = ".usdc") -> list[Job]:
+    """Jobs from a CSV (header: audio, text | text_file | alignment, speaker, output) or a JSON manifest
+    (a list of objects with those keys, or {"jobs": [...]}).
+
+    Relative audio/text_file/alignment paths are relative to the manifest's folder; relative outputs to
+    `outdir` (default: the manifest's folder). A missing output is the audio's name with `default_ext`.
+    """
+    import csv
+
+    path = Path(path)
+    try:
+        raw = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FacegenError(f"cannot read manifest {path} ({exc}): pass a UTF-8 CSV or JSON file") from exc
+    if raw.lstrip().startswith(("[", "{")):
+        try:
+            data = json.loads(raw)
+        except json.JSONDecodeError as exc:
+            raise FacegenError(f"manifest {path} is not valid JSON ({exc}): fix it") from exc
+        rows = data.get("jobs") if isinstance(data, dict) else data
+        if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+            raise FacegenError(f'manifest {path} must be a list of objects or {{"jobs": [...]}}')
+    else:
+        rows = list(csv.DictReader(raw.splitlines()))
+    base = path.parent
+    out_base = Path(outdir) if outdir is not None else base
+    jobs = []
+    for n, row in enumerate(rows, 1):
+        row = {str(k).strip().lower(): (str(v).strip() if v is not None else "") for k, v in row.items() if k}
+        unknown = sorted(set(row) - set(MANIFEST_COLUMNS))
+        if unknown:
+            raise FacegenError(f"manifest {path}: unknown column(s) {', '.join(unknown)}: use "
+                               f"{', '.join(MANIFEST_COLUMNS)}")
+        if not row.get("audio"):
+            raise FacegenError(f"manifest {path}, row {n}: no audio file given")
+        audio = base / row["audio"]
+        text = row.get("text") or None
+        if row.get("text_file"):
+            try:
+                text = (base / row["text_file"]).read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as exc:
+                raise FacegenError(f"manifest {path}, row {n}: cannot read {row['text_file']} ({exc})") from exc
+        alignment = base / row["alignment"] if row.get("alignment") else None
+        if text and alignment:
+            raise FacegenError(f"manifest {path}, row {n}: give text or alignment, not both")
+        output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
+        jobs.append(Job(audio=audio, output=out_base / output, text=text, alignment=alignment,
+                        speaker=row.get("speaker") or None, no_text=not text and alignment is None))
+    if not jobs:
+        raise FacegenError(f"manifest {path} lists no clips")
+    return jobs
+
+
+def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
+                 batch_size: int = 16, window: int = 64, say: Say = _silent,
+                 warn: Say = _silent) -> Iterator[tuple[Job, object]]:
+    """Animate many clips with the model and text backend loaded once: yields (job, Animation) or
+    (job, FacegenError) for every job, in the input order within windows of `window` jobs.
+
+    Within a window, clips are sorted by length and run through the decoder BiLSTMs `batch_size` at a
+    time (packed: each clip's result equals its own single run). The frames of each Animation are a
+    FrameStream (computed when the writer reads them).
+    """
+    from facegen.animate import finish_animation, prepare_clip
+    from facegen.bundle import Bundle, load_bundle
+
+    if not isinstance(bundle, Bundle):
+        bundle = load_bundle(bundle)
+    dev = select_device(device, warn)
+    pending: list[Job] = []
+
+    def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object]]:
+        prepared: dict[int, object] = {}
+        for i, job in enumerate(window_jobs):
+            try:
+                prepared[i] = prepare_clip(job.audio, bundle=bundle, text=job.text, alignment=job.alignment,
+                                           no_text=job.no_text, speaker=job.speaker, text_model=text_model,
+                                           warn=warn)
+            except FacegenError as exc:
+                prepared[i] = exc
+        ready = sorted((i for i, c in prepared.items() if not isinstance(c, FacegenError)),
+                       key=lambda i: prepared[i].num_frames)
+        for b in range(0, len(ready), batch_size):
+            ids = ready[b:b + batch_size]
+            clips = [prepared[i] for i in ids]
+            states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker) for c in clips],
+                                          device=dev)
+            for i, clip, st in zip(ids, clips, states, strict=True):
+                prepared[i] = finish_animation(bundle, clip, frame_stream(bundle, st, clip.mesh.vertices))
+        for i, job in enumerate(window_jobs):
+            yield job, prepared[i]
+
+    for job in jobs:
+        pending.append(job)
+        if len(pending) >= window:
+            yield from run(pending)
+            pending = []
+    if pending:
+        yield from run(pending)
+
+
+def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
+              batch_size: int = 16, say: Say = _silent, warn: Say = _silent) -> list[JobResult]:
+    """Animate every job and write its output (format from the extension); a clip that fails is
+    reported in its JobResult and the others go on. Returns one JobResult per job, in order."""
+    from facegen.exchange import write_animation
+
+    results = []
+    start = time.perf_counter()
+    for n, (job, anim) in enumerate(animate_many(jobs, bundle=bundle, device=device, text_model=text_model,
+                                                 batch_size=batch_size, warn=warn), 1):
+        t0 = time.perf_counter()
+        if isinstance(anim, FacegenError):
+            results.append(JobResult(job, error=str(anim)))
+        else:
+            try:
+                job.output.parent.mkdir(parents=True, exist_ok=True)
+                files = write_animation(anim, job.output, audio_source=job.audio)
+                results.append(JobResult(job, files=files, frames=anim.num_frames,
+                                         seconds=time.perf_counter() - t0))
+            except FacegenError as exc:
+                results.append(JobResult(job, error=str(exc)))
+        r = results[-1]
+        say(f"[{n}/{len(jobs)}] {job.output}: " + (f"{r.frames} frames" if r.ok else f"error: {r.error}")
+            + f" ({time.perf_counter() - start:.1f} s)")
+    return results
