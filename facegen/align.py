@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import json
 import math
 import os
@@ -380,6 +381,67 @@ def _free_gaps(decoder, pcm: bytes, n_frames: int) -> np.ndarray | None:
     return _state_gaps(decoder, pcm, n_frames)
 
 
+def _match_scores(decoder, pcm: bytes, n_frames: int,
+                  words: list[tuple[str, int, int]]) -> tuple[np.ndarray, np.ndarray | None]:
+    """State gaps of the word alignment and of the free phone loop, for _check_match.
+
+    Both passes cost time and memory that grow faster than the audio's length (3 minutes: 90 s and
+    1.3 GB; 10 minutes: more than 6 GB), so audio longer than CHECK_SECONDS is scored in segments of
+    at most that length, cut in the longest pause between aligned words; each segment is aligned again
+    with its own words and scored alone. Falls back to one pass when a segment does not realign.
+    """
+    segments = _segments(words, n_frames)
+    if len(segments) == 1:
+        return _state_gaps(decoder, pcm, n_frames), _free_gaps(decoder, pcm, n_frames)
+    gaps, free = np.zeros(n_frames), np.zeros(n_frames)
+    for first, last, keys in segments:  # frames first..last-1
+        part = pcm[first * _FRAME_BYTES:last * _FRAME_BYTES]
+        decoder.set_align_text(" ".join(keys))
+        if [_base(w) for w, _, _ in _decode(decoder, part) if not _is_filler(w)] != keys:
+            decoder.set_align_text(" ".join(_base(w) for w, _, _ in words))
+            _decode(decoder, pcm)
+            return _state_gaps(decoder, pcm, n_frames), _free_gaps(decoder, pcm, n_frames)
+        n = min(decoder.n_frames(), last - first)
+        gaps[first:first + n] = _state_gaps(decoder, part, decoder.n_frames())[:n]
+        seg_free = _free_gaps(decoder, part, decoder.n_frames())
+        free[first:first + n] = gaps[first:first + n] if seg_free is None else seg_free[:n]
+    return gaps, free
+
+
+CHECK_SECONDS = 30.0  # longest stretch of audio scored in one pass by _match_scores
+_FRAME_BYTES = int(RATE * FRAME) * 2  # 16-bit PCM bytes per pocketsphinx frame
+
+
+def _segments(words: list[tuple[str, int, int]], n_frames: int) -> list[tuple[int, int, list[str]]]:
+    """(first frame, end frame, dictionary words) of segments of at most CHECK_SECONDS, cut in the middle
+    of the longest pause between consecutive words in each segment's second half (one segment when the
+    audio is short or no pause can be found)."""
+    limit = int(CHECK_SECONDS / FRAME)
+    if n_frames <= limit:
+        return [(0, n_frames, [_base(w) for w, _, _ in words])]
+    cuts, start, i = [0], 0, 0
+    while n_frames - start > limit:
+        best = None
+        for j in range(i, len(words) - 1):
+            end, following = words[j][2] + 1, words[j + 1][1]
+            if following - start > limit:
+                break
+            if end - start >= limit // 2 and (best is None or following - end > best[0]):
+                best = (following - end, (end + following) // 2, j + 1)
+        if best is None:
+            break
+        start, i = best[1], best[2]
+        cuts.append(start)
+    cuts.append(n_frames)
+    segments = []
+    for a, b in itertools.pairwise(cuts):
+        keys = [_base(w) for w, first, _ in words if a <= first < b]
+        segments.append((a, b, keys))
+    if any(not keys for _, _, keys in segments):
+        return [(0, n_frames, [_base(w) for w, _, _ in words])]
+    return segments
+
+
 def _loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
     """Frames (10 ms step, 25 ms window) clearly louder than the recording's noise floor."""
     hop, win = RATE // 100, int(0.025 * RATE)
@@ -447,8 +509,7 @@ def align(audio: np.ndarray, sample_rate: int, transcript: str) -> list[Word]:
         else:
             raise _mismatch("no alignment of its words to the audio exists")
         n_frames = decoder.n_frames()
-        gaps = _state_gaps(decoder, pcm, n_frames)
-        free = _free_gaps(decoder, pcm, n_frames)
+        gaps, free = _match_scores(decoder, pcm, n_frames, words)
     _check_match(audio, words, gaps, free)
     duration = len(audio) / RATE
     times: dict[int, list[float]] = {}

@@ -40,7 +40,7 @@ class FeatureConfig:
         hop = self.sample_rate / self.fps
         if abs(hop - round(hop)) > 1e-9:
             raise FacegenError(f"fps {self.fps} does not divide the sample rate {self.sample_rate}: choose another fps")
-        return int(round(hop))
+        return round(hop)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -96,7 +96,7 @@ def resample(samples: np.ndarray, orig_sr: int, target_sr: int) -> np.ndarray:
 
 def num_frames(duration: float, fps: float) -> int:
     """The number of animation frames of a clip: round(duration * fps)."""
-    return int(round(duration * fps))
+    return round(duration * fps)
 
 
 def check_speech(samples: np.ndarray, sr: int, fps: float, name: str = "audio") -> None:

@@ -73,7 +73,7 @@ class Bundle:
                 "num_faces": int(self.template.faces.shape[0]),
                 "fingerprint": self.fingerprint,
             },
-            "regions": {k: int(len(v)) for k, v in self.template.regions.items()},
+            "regions": {k: len(v) for k, v in self.template.regions.items()},
             "provenance": self.provenance,
         }
 
@@ -208,4 +208,4 @@ def topology_of(meta: dict) -> tuple[int, str]:
     return int(meta["topology"]["num_vertices"]), str(meta["topology"]["fingerprint"])
 
 
-__all__ = ["Bundle", "save_bundle", "load_bundle", "read_metadata", "default_bundle_path", "topology_fingerprint"]
+__all__ = ["Bundle", "default_bundle_path", "load_bundle", "read_metadata", "save_bundle", "topology_fingerprint"]

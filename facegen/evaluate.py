@@ -28,13 +28,18 @@ from __future__ import annotations
 import json
 import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
-from facegen.data import Dataset, Splits, Warn, check_split, warn_stderr
+from facegen.data import Dataset, Item, Splits, Warn, check_split, warn_stderr
 from facegen.errors import FacegenError
+
+if TYPE_CHECKING:
+    from facegen.bundle import Bundle
 
 METRICS = ("lve", "fdd", "mean_error", "upper_error", "lower_error", "lip_error")
 UNITS = {
@@ -105,7 +110,42 @@ def _region(dataset: Dataset, bundle, name: str, file: str, num_vertices: int) -
     return idx
 
 
-def evaluate(
+@dataclass
+class Run:
+    """A bundle ready to predict the usable sequences of a dataset split (see `prepare`)."""
+
+    bundle: Bundle
+    dataset: Dataset
+    split: str
+    items: list[Item]
+    device: torch.device
+    lips: np.ndarray  # vertex indices of the lip region
+    upper: np.ndarray  # vertex indices of the upper-face region
+
+    def conditions(self, item: Item) -> list[int]:
+        """Speaker indices to condition `item` on: its own speaker, or every speaker for test B."""
+        if self.split == "test-b":
+            return list(range(len(self.bundle.speakers)))
+        return [self.bundle.speakers.index(item.subject)]
+
+    def predict(self, item: Item, condition: int, encoders: bool = False
+                ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Offsets [T, V, 3] of `item` conditioned on speaker `condition`; with `encoders`, also the
+        encoder outputs ("audio" Ha [T, 128] and/or "text" Hl [T, 64]) as float32 arrays."""
+        model = self.bundle.model
+        dev = self.device
+        with torch.inference_mode():
+            mel = torch.from_numpy(item.mel)[None].to(dev)
+            text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
+            speaker = torch.zeros(1, len(self.bundle.speakers), device=dev)
+            speaker[0, condition] = 1.0
+            offsets = model(mel, text, speaker)[0].cpu().numpy()
+            enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker).items()}
+                   if encoders else {})
+        return offsets, enc
+
+
+def prepare(
     bundle_path: str | os.PathLike | None,
     data_root: str | os.PathLike,
     split: str = "test-a",
@@ -117,15 +157,12 @@ def evaluate(
     on_bad: str = "skip",
     quiet: bool = False,
     warn: Warn | None = warn_stderr,
-) -> dict:
-    """Evaluate a model bundle on a split of the dataset at `data_root` (see the module docstring).
+) -> Run:
+    """Load the bundle and the features of a split's usable sequences, with the checks evaluate needs.
 
     `splits` defaults to the split the bundle was trained with (its provenance), else the community's
-    with the bundle's speakers as training subjects. Returns a JSON-ready dict: bundle, data, split,
-    conditioning, metrics (pooled), units, per_sequence rows, skipped sequences.
+    with the bundle's speakers as training subjects.
     """
-    from tqdm import tqdm
-
     from facegen.bundle import load_bundle
     from facegen.train import resolve_device
 
@@ -164,25 +201,45 @@ def evaluate(
                            f"{num_vertices}: evaluate on a dataset with the model's topology")
     lips = _region(dataset, bundle, "lips", "lve.txt", num_vertices)
     upper = _region(dataset, bundle, "upper_face", "fdd.txt", num_vertices)
+    bundle.model.to(dev).eval()
+    return Run(bundle, dataset, split, items, dev, lips, upper)
 
-    model = bundle.model.to(dev).eval()
+
+def evaluate(
+    bundle_path: str | os.PathLike | None,
+    data_root: str | os.PathLike,
+    split: str = "test-a",
+    *,
+    splits: Splits | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    text_model_path: str | os.PathLike | None = None,
+    device: str = "cpu",
+    on_bad: str = "skip",
+    quiet: bool = False,
+    warn: Warn | None = warn_stderr,
+) -> dict:
+    """Evaluate a model bundle on a split of the dataset at `data_root` (see the module docstring).
+
+    `splits` defaults to the split the bundle was trained with (its provenance), else the community's
+    with the bundle's speakers as training subjects. Returns a JSON-ready dict: bundle, data, split,
+    conditioning, metrics (pooled), units, per_sequence rows, skipped sequences.
+    """
+    from tqdm import tqdm
+
+    run = prepare(bundle_path, data_root, split, splits=splits, cache_dir=cache_dir,
+                  text_model_path=text_model_path, device=device, on_bad=on_bad, quiet=quiet, warn=warn)
+    bundle, dataset, items = run.bundle, run.dataset, run.items
+    num_vertices = bundle.template.num_vertices
     pooled_rows: list[dict] = []
     per_sequence: list[dict] = []
     bar = tqdm(items, desc=f"evaluate {split}", unit="seq", disable=quiet, file=sys.stderr, leave=False)
     for item in bar:
-        conditions = list(range(len(bundle.speakers))) if split == "test-b" else \
-            [bundle.speakers.index(item.subject)]
+        conditions = run.conditions(item)
         gt = item.vertices().reshape(item.num_frames, num_vertices, 3)
         rows = []
-        with torch.inference_mode():
-            mel = torch.from_numpy(item.mel)[None].to(dev)
-            text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
-            for c in conditions:
-                speaker = torch.zeros(1, len(bundle.speakers), device=dev)
-                speaker[0, c] = 1.0
-                offsets = model(mel, text, speaker)[0].cpu().numpy()
-                pred = item.template[None] + offsets
-                rows.append(sequence_metrics(pred, gt, item.template, lips, upper))
+        for c in conditions:
+            offsets, _ = run.predict(item, c)
+            rows.append(sequence_metrics(item.template[None] + offsets, gt, item.template, run.lips, run.upper))
         pooled_rows += rows
         mean = pool(rows)
         mean["fdd"] = float(np.mean([r["fdd"] for r in rows]))

@@ -82,12 +82,9 @@ class _Profile:
             stages["writing"] = end - self.marks["animate_end"]
         payload = {"facegen_profile": {k: round(v, 4) for k, v in stages.items()},
                    "marks": self.marks, "exit": end}
-        try:
-            import resource
-
-            payload["max_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
-        except ImportError:  # not on Windows
-            pass
+        peak = peak_rss_mb()
+        if peak is not None:
+            payload["max_rss_mb"] = round(peak, 1)
         sys.stderr.write(json.dumps(payload) + "\n")
         sys.stderr.flush()
 
@@ -104,6 +101,24 @@ class _Stage:
 
 
 PROFILE = _Profile()
+
+
+def peak_rss_mb() -> float | None:
+    """This process's peak resident memory in MB: VmHWM on Linux (its own, unlike ru_maxrss, which keeps
+    the parent's peak across fork + exec), else ru_maxrss; None where neither exists."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    try:
+        import resource
+    except ImportError:  # Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB elsewhere
 
 
 # --------------------------------------------------------------------------------------------------

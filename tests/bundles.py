@@ -17,8 +17,7 @@ def make_bundle(template: Mesh, path: Path | None = None, *, speakers=("F2", "F3
                 fusion: str = "tensor", seed: int = 0, scale: float = 0.002, small: bool = True) -> Bundle:
     """A bundle with random weights; the output layer scaled so offsets are a few mm-ish of motion."""
     torch.manual_seed(seed)
-    dims = dict(conv_channels=128, audio_dim=16, text_hidden=16, text_dim_out=8, decoder_dim=16, lstm_dim=16) \
-        if small else {}
+    dims = {"audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16, "lstm_dim": 16} if small else {}
     cfg = ModelConfig(num_vertices=template.num_vertices, num_speakers=len(speakers), text_dim=text_dim,
                       modalities=modalities, fusion=fusion, **dims)
     model = FaceModel(cfg)

@@ -77,4 +77,4 @@ def test_silent_and_too_short_audio_refused():
 
 def test_fps_must_divide_sample_rate():
     with pytest.raises(FacegenError, match="fps"):
-        FeatureConfig(fps=29.97).hop_length
+        _ = FeatureConfig(fps=29.97).hop_length

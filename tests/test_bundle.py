@@ -3,8 +3,8 @@ import json
 import numpy as np
 import pytest
 import torch
-
 from bundles import make_bundle
+
 from facegen.bundle import load_bundle, read_metadata, save_bundle
 from facegen.errors import FacegenError
 

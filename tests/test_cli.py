@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
-
 from bundles import make_bundle
 
 SENTENCE = "What an excellent room you have, sir. Such expensive furnishings!"
@@ -18,7 +17,7 @@ SENTENCE = "What an excellent room you have, sir. Such expensive furnishings!"
 
 def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "facegen", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=300)
+                          cwd=cwd, timeout=300, check=False)
 
 
 @pytest.fixture(scope="module")
@@ -29,8 +28,8 @@ def work(tmp_path_factory, biwi_template):
     speech = synthesize(SENTENCE, voice="en-us", pitch=40, rate=165)
     sf.write(d / "speech.wav", speech.audio, speech.sample_rate, subtype="PCM_16")
     (d / "line.txt").write_text(SENTENCE + "\n")
-    json.dump({"words": [{"word": w.text, "start": w.start, "end": w.end} for w in speech.words]},
-              open(d / "words.json", "w"))
+    (d / "words.json").write_text(json.dumps({"words": [{"word": w.text, "start": w.start, "end": w.end}
+                                                         for w in speech.words]}))
     make_bundle(biwi_template, d / "model.safetensors", speakers=("F2", "F3", "F4", "M3"))
     return d, speech
 
@@ -124,7 +123,7 @@ def _bad_inputs(d: Path) -> dict:
     sf.write(b / "silent.wav", np.zeros(16000, np.float32), 16000)
     sf.write(b / "short.wav", 0.3 * np.sin(np.arange(300) / 5).astype(np.float32), 16000)
     (b / "malformed.json").write_text("{not json")
-    json.dump({"words": [{"word": "hello", "start": 0.1, "end": 99.0}]}, open(b / "late.json", "w"))
+    (b / "late.json").write_text(json.dumps({"words": [{"word": "hello", "start": 0.1, "end": 99.0}]}))
     data = (d / "model.safetensors").read_bytes()
     (b / "trunc.safetensors").write_bytes(data[: len(data) // 3])
     from facegen.mesh import Mesh, read_mesh, write_mesh

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import soundfile as sf
 import torch
-
 from bundles import make_bundle
+
 from facegen.errors import FacegenError
 from facegen.inference import (
     FrameStream,
@@ -105,8 +105,12 @@ def test_frame_stream_indexing(bundle, face):
 
 
 MEMORY_SCRIPT = textwrap.dedent("""
-    import json, resource, sys, time
+    import json, re, sys, time
     import numpy as np, torch
+
+    def peak_mb():  # this process's own peak RSS (ru_maxrss would include the parent's, inherited at exec)
+        return int(re.search(r"VmHWM:\\s+(\\d+)", open("/proc/self/status").read()).group(1)) / 1024
+
     sys.path.insert(0, {tests!r})
     from bundles import make_bundle
     from facegen.inference import predict_frames
@@ -118,7 +122,9 @@ MEMORY_SCRIPT = textwrap.dedent("""
     rng = np.random.default_rng(0)
     mel = rng.normal(-50, 20, (T, 128)).astype(np.float32)
     text = rng.normal(0, 1, (T, 384)).astype(np.float32)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # reset the peak: measure only what streaming adds
+    before = peak_mb()
     t0 = time.perf_counter()
     frames = predict_frames(bundle, mel, text, 0, template=face.vertices)
     V = face.num_vertices
@@ -126,19 +132,20 @@ MEMORY_SCRIPT = textwrap.dedent("""
         np.lib.format.write_array_header_1_0(f, {{"descr": "<f4", "fortran_order": False, "shape": (T, 3 * V)}})
         for _, block in frames.blocks():
             f.write(block.tobytes())
-    print(json.dumps({{"before_mb": before, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    print(json.dumps({{"before_mb": before, "peak_mb": peak_mb(),
                       "seconds": time.perf_counter() - t0, "output_mb": frames.nbytes / 2**20,
-                      "last": frames[T - 1][:4].tolist()}}))
+                      "last": frames[T - 1][:4].reshape(-1).tolist()}}))
 """)
 
 
+@pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="needs Linux /proc to measure RSS")
 def test_long_clip_streams_in_bounded_memory(tmp_path):
     """3 minutes (4,500 frames, 1.2 GB of vertices) written block by block: RSS grows by far less."""
     T = 4500
     script = tmp_path / "stream.py"
     script.write_text(MEMORY_SCRIPT.format(tests=str(REPO / "tests")))
     out = tmp_path / "long.npy"
-    proc = subprocess.run([sys.executable, str(script), str(T), str(out)], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, str(script), str(T), str(out)], check=False, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stderr
     r = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -148,7 +155,7 @@ def test_long_clip_streams_in_bounded_memory(tmp_path):
     assert growth < 400 and growth < 0.3 * r["output_mb"]
     data = np.load(out, mmap_mode="r")
     assert data.shape == (T, 3 * 23370)
-    assert np.allclose(data[T - 1, :4], r["last"])
+    assert np.allclose(data[T - 1, :12], r["last"])
 
 
 def test_device_selection_and_fallback():
@@ -189,7 +196,7 @@ def test_device_cuda_without_gpu_is_a_user_error(clips, tmp_path):
     wav, words = clips[1][0]
     proc = subprocess.run([sys.executable, "-m", "facegen", "animate", str(wav), "--alignment", str(words),
                            "--device", "cuda", "-o", str(tmp_path / "out.npy")],
-                          capture_output=True, text=True, timeout=120)
+                          check=False, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.strip().count("\n") == 0 and "no CUDA GPU" in proc.stderr, proc.stderr
     assert not list(tmp_path.iterdir())
@@ -246,7 +253,7 @@ def test_profile_env_prints_stage_timings(bundle, clips, tmp_path):
     env = dict(os.environ, FACEGEN_PROFILE="1")
     proc = subprocess.run([sys.executable, "-m", "facegen", "animate", str(wav), "--alignment", str(words),
                            "-m", str(model), "--device", "cpu", "-q", "-o", str(tmp_path / "out.usdc")],
-                          capture_output=True, text=True, timeout=300, env=env)
+                          check=False, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stderr.strip().splitlines()[-1])
     stages = report["facegen_profile"]
