@@ -11,10 +11,11 @@ fused Adam).
     python benchmarks/bench_train.py                 # 1 warm-up step, then 1 timed epoch on 2 threads
     python benchmarks/bench_train.py --epochs 2 --threads 1 --modalities audio
 
-Prints seconds per epoch and sequences per second (target: <= 60 s per epoch on 2 CPU cores), the time
-to write one checkpoint, and the load average before and after: on a machine shared with other jobs the
-numbers are not comparable. OpenMP threads wait passively (OMP_WAIT_POLICY=PASSIVE unless set): with
-spinning threads, a 2-thread run on 2 busy cores was 3-5x slower than a 1-thread run.
+Prints seconds per epoch and sequences per second (target: <= 60 s per epoch on 2 CPU cores), the CPU
+time the epoch used, the time to write one checkpoint, and the load average before and after: on a
+machine shared with other jobs the wall times are not comparable (with --threads 1 the CPU time is close
+to what the epoch takes on one idle core). OpenMP threads wait passively (OMP_WAIT_POLICY=PASSIVE unless
+set): with spinning threads, a 2-thread run on 2 busy cores was 3-5x slower than a 1-thread run.
 """
 
 from __future__ import annotations
@@ -90,11 +91,13 @@ def main() -> None:
             train_epoch(model, optimizer, batches, [0, 1])  # warm-up: allocations, oneDNN kernels
             times = []
             for epoch in range(args.epochs):
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 loss = train_epoch(model, optimizer, batches, epoch_order(0, epoch, len(batches)))
                 times.append(time.perf_counter() - t0)
+                cpu = time.process_time() - c0
                 print(f"epoch {epoch + 1}: {times[-1]:.1f} s, {len(batches) / times[-1]:.2f} sequences/s, "
-                      f"{frames / times[-1]:.0f} frames/s, loss {loss:.3e}")
+                      f"{frames / times[-1]:.0f} frames/s, loss {loss:.3e}; CPU time {cpu:.1f} s "
+                      f"({cpu / times[-1]:.2f} cores busy on average)")
             t0 = time.perf_counter()
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
             save_checkpoint(Path(tmp) / CHECKPOINT, model, best_state, optimizer, {"epoch": args.epochs})

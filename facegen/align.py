@@ -385,16 +385,20 @@ def _match_scores(decoder, pcm: bytes, n_frames: int,
                   words: list[tuple[str, int, int]]) -> tuple[np.ndarray, np.ndarray | None]:
     """State gaps of the word alignment and of the free phone loop, for _check_match.
 
-    Both passes cost time and memory that grow faster than the audio's length (3 minutes: 90 s and
-    1.3 GB; 10 minutes: more than 6 GB), so audio longer than CHECK_SECONDS is scored in segments of
-    at most that length, cut in the longest pause between aligned words; each segment is aligned again
-    with its own words and scored alone. Falls back to one pass when a segment does not realign.
+    Both passes cost time and memory that grow faster than the audio's length (3 minutes in one pass:
+    90 s and 1.3 GB; 10 minutes: more than 6 GB), so audio longer than CHECK_SECONDS is scored in
+    segments of at most that length, cut in the longest pause between aligned words; each segment is
+    aligned again with its own words and scored alone. At most CHECK_SEGMENTS segments, spread evenly
+    over the clip, are scored (the frames of the others are NaN: their words are left out of the
+    median); the share of speech outside the words is still measured on the whole clip. Falls back to
+    one pass when a segment does not realign.
     """
     segments = _segments(words, n_frames)
     if len(segments) == 1:
         return _state_gaps(decoder, pcm, n_frames), _free_gaps(decoder, pcm, n_frames)
-    gaps, free = np.zeros(n_frames), np.zeros(n_frames)
-    for first, last, keys in segments:  # frames first..last-1
+    gaps, free = np.full(n_frames, np.nan), np.full(n_frames, np.nan)
+    chosen = np.unique(np.linspace(0, len(segments) - 1, min(CHECK_SEGMENTS, len(segments))).round().astype(int))
+    for first, last, keys in (segments[i] for i in chosen):  # frames first..last-1
         part = pcm[first * _FRAME_BYTES:last * _FRAME_BYTES]
         decoder.set_align_text(" ".join(keys))
         if [_base(w) for w, _, _ in _decode(decoder, part) if not _is_filler(w)] != keys:
@@ -409,6 +413,7 @@ def _match_scores(decoder, pcm: bytes, n_frames: int,
 
 
 CHECK_SECONDS = 30.0  # longest stretch of audio scored in one pass by _match_scores
+CHECK_SEGMENTS = 8  # most segments scored (4 minutes of audio at most)
 _FRAME_BYTES = int(RATE * FRAME) * 2  # 16-bit PCM bytes per pocketsphinx frame
 
 
@@ -479,8 +484,8 @@ def _check_match(audio: np.ndarray, words: list[tuple[str, int, int]], gaps: np.
     unexplained = float(np.sum(loud & ~in_words)) / max(int(np.sum(loud)), 1)
     if unexplained > MAX_UNEXPLAINED:
         raise _mismatch(f"{unexplained:.0%} of the speech lies outside its words")
-    if free is not None:
-        excess = float(np.median([gaps[f:l + 1].mean() - free[f:l + 1].mean() for _, f, l in words]))
+    if free is not None:  # words in unscored segments of long audio are NaN and left out
+        excess = float(np.nanmedian([gaps[f:l + 1].mean() - free[f:l + 1].mean() for _, f, l in words]))
         if excess > MAX_WORD_GAP:
             raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {MAX_WORD_GAP:.0f}")
 

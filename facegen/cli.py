@@ -253,21 +253,27 @@ def _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_
 @click.option("--checkpoint-dir", type=click.Path(file_okay=False), help="Default: OUTPUT's name + '.ckpt/'.")
 @click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default="fp32", show_default=True,
               help="How the bundle stores its weights.")
+@click.option("--threads", type=int, help="CPU threads for torch (default: all cores).")
+@click.option("--strict", is_flag=True, help="Refuse to train when a sequence is missing or corrupt (default: skip it).")
 @_split_options
 @click.option("--quiet", "-q", is_flag=True)
 def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device, resume,
-          checkpoint_dir, precision, train_subjects, test_subjects, train_sentences, val_sentences,
+          checkpoint_dir, precision, threads, strict, train_subjects, test_subjects, train_sentences, val_sentences,
           test_sentences, quiet):
     """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
+    import os
+
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # busy-waiting OpenMP threads stall on shared cores
     from facegen.train import train as run
 
     splits = _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
     result = run(data, output, text_backend=text_backend, text_model_path=text_model, modalities=modalities,
                  fusion=fusion, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, device=device,
-                 resume=resume, splits=splits, checkpoint_dir=checkpoint_dir, precision=precision, quiet=quiet)
+                 resume=resume, splits=splits, checkpoint_dir=checkpoint_dir, precision=precision, threads=threads,
+                 on_bad="fail" if strict else "skip", quiet=quiet)
     click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs, "best_epoch": result.best_epoch,
                            "best_loss": result.best_loss, "seconds": round(result.seconds, 1),
-                           "curves": str(result.curves_csv)}))
+                           "curves": str(result.curves_csv), "skipped": len(result.skipped)}))
 
 
 @cli.command()
@@ -280,16 +286,18 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Also write the paper's analysis figures (PNG) into this folder.")
+@click.option("--strict", is_flag=True, help="Fail on a missing or corrupt sequence (default: skip it).")
 @click.option("--quiet", "-q", is_flag=True)
 def evaluate(bundle, data, split, text_model, device, train_subjects, test_subjects, train_sentences,
-             val_sentences, test_sentences, as_json, plots, quiet):
+             val_sentences, test_sentences, as_json, plots, strict, quiet):
     """Evaluate a model BUNDLE on a split of the dataset DATA: LVE, FDD, vertex errors."""
     from facegen.evaluate import evaluate as run
     from facegen.evaluate import format_table
 
     given = (train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
     splits = _splits(*given) if any(v is not None for v in given) else None
-    result = run(bundle, data, split, splits=splits, text_model_path=text_model, device=device, quiet=quiet)
+    result = run(bundle, data, split, splits=splits, text_model_path=text_model, device=device,
+                 on_bad="fail" if strict else "skip", quiet=quiet)
     click.echo(json.dumps(result, indent=1) if as_json else format_table(result))
     if plots:
         from facegen.plots import write_plots

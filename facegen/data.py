@@ -867,9 +867,28 @@ def _extract_audio(video: Path, wav: Path, sample_rate: int) -> None:
             raise FacegenError(f"ffmpeg could not extract the audio of {video.name} ({msg})")
 
 
-def read_transcripts(path: str | os.PathLike) -> dict[int, str]:
-    """Sentence transcripts: lines "e01 text", "01 text" or "1: text" — or just one sentence per line."""
-    lines = [ln.strip() for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln.strip()]
+def read_transcripts(path: str | os.PathLike) -> dict[int | str, str]:
+    """Sentence transcripts from a file or a folder.
+
+    A file: lines "e01 text", "01 text" or "1: text" — or just one sentence per line, in order — giving
+    {sentence number: text}. A folder: one file per sentence (e01.txt, 01.txt → {1: text}) and/or per
+    sequence (F1_e01.txt → {"F1_e01": text}, which wins over the sentence's text for that sequence).
+    """
+    path = Path(path)
+    if path.is_dir():
+        out: dict[int | str, str] = {}
+        for file in sorted(path.glob("*.txt")):
+            text = " ".join(file.read_text(encoding="utf-8", errors="replace").split())
+            m = re.fullmatch(r"([FM]\d+)_e0*(\d{1,3})", file.stem, re.IGNORECASE)
+            if m:
+                out[sequence_name(m.group(1).upper(), int(m.group(2)))] = text
+            elif (parsed := _sentence_of(file.stem)) is not None:
+                out[parsed[1]] = text
+        return out
+    if not path.is_file():
+        raise FacegenError(f"transcripts {path} do not exist: pass a file with one sentence per line or "
+                           "a folder of .txt files")
+    lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip()]
     numbered = [re.match(r"^e?0*(\d{1,3})[\s:.)\t-]+(.+)$", ln, re.IGNORECASE) for ln in lines]
     if lines and all(numbered):
         return {int(m.group(1)): m.group(2).strip() for m in numbered if m}
@@ -899,8 +918,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
     area of that subject's (rotated) template, so the frames keep the template's frame of reference.
 
     Also writes templates.pkl, BIWI.ply (the mean of the normalised templates, with their face list),
-    text/<name>.txt from `transcripts` (see read_transcripts), and copies lve.txt/fdd.txt from
-    `regions` (a folder, e.g. CodeTalker's BIWI/regions) into regions/.
+    text/<name>.txt from `transcripts` (a file or folder, see read_transcripts), and copies lve.txt and
+    fdd.txt from `regions` (a folder, e.g. CodeTalker's BIWI/regions) into regions/.
     """
     from tqdm import tqdm
 
@@ -1012,8 +1031,9 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
             else:
                 _extract_audio(video, out / "wav" / f"{name}.wav", sample_rate)
             writer.write_sequence(name, motion)
-            if number in sentences_text:
-                writer.write_transcript(name, sentences_text[number])
+            transcript = sentences_text.get(name, sentences_text.get(number))
+            if transcript:
+                writer.write_transcript(name, transcript)
             report.sequences.append(name)
         except FacegenError as exc:
             report.skipped.append((name, str(exc)))

@@ -239,7 +239,8 @@ def evaluate(
         rows = []
         for c in conditions:
             offsets, _ = run.predict(item, c)
-            rows.append(sequence_metrics(item.template[None] + offsets, gt, item.template, run.lips, run.upper))
+            pred = item.template[None] + offsets
+            rows.append(sequence_metrics(pred, gt, item.template, run.lips, run.upper))
         pooled_rows += rows
         mean = pool(rows)
         mean["fdd"] = float(np.mean([r["fdd"] for r in rows]))

@@ -81,7 +81,8 @@ class _Profile:
         if "animate_end" in self.marks:  # the CLI writes the asset after animate() returns
             stages["writing"] = end - self.marks["animate_end"]
         payload = {"facegen_profile": {k: round(v, 4) for k, v in stages.items()},
-                   "marks": self.marks, "exit": end}
+                   "marks": self.marks, "exit": end,
+                   "heavy_modules": sorted(m for m in HEAVY_MODULES if m in sys.modules)}
         peak = peak_rss_mb()
         if peak is not None:
             payload["max_rss_mb"] = round(peak, 1)
@@ -101,6 +102,7 @@ class _Stage:
 
 
 PROFILE = _Profile()
+HEAVY_MODULES = ("librosa", "numba", "transformers", "pxr", "scipy", "matplotlib", "trimesh")
 
 
 def peak_rss_mb() -> float | None:

@@ -27,6 +27,7 @@ import io
 import json
 import os
 import sys
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +45,7 @@ CORRELATION_CMAP = "jet"  # blue (low) → red (high), as in the paper
 ACTIVATION_CMAP = "viridis"  # purple (low) → yellow (high), as in the paper
 MAX_PNG_BYTES = 280_000  # larger figures are stored with a 256-colour palette
 STATIC = 1e-6  # a vertex whose motion std is below this fraction of the largest one does not move
+STATIC_GREY = (0.62, 0.62, 0.62)  # sRGB of vertices that do not move in Fig. 3
 
 
 # ------------------------------------------------------------------------------------------ statistics
@@ -81,7 +83,8 @@ def correlation_map(features: np.ndarray, offsets: np.ndarray, chunk: int = 2048
     For vertex v, m_v = its offsets projected on its main motion direction (`principal_motion`); the
     value is max over d of |Pearson r(features[:, d], m_v)| over the N frames, in [0, 1]: 1 when one
     feature dimension alone predicts the vertex's motion linearly. Vertices that do not move (motion std
-    below STATIC × the largest) and constant feature dimensions count as r = 0.
+    below STATIC × the largest, e.g. parts the model never animates) get NaN; constant feature dimensions
+    count as r = 0.
 
     Vectorised: with Z_f [N, D] and Z_m [N, V] the standardised columns, r = Z_fᵀ Z_m / N, one matrix
     product per chunk of vertices (float64; memory ~ N × chunk × 3 × 8 bytes).
@@ -92,7 +95,7 @@ def correlation_map(features: np.ndarray, offsets: np.ndarray, chunk: int = 2048
         raise ValueError(f"need features [N, D] and offsets [N, V, 3], got {features.shape} and "
                          f"{offsets.shape}")
     n, num_vertices = offsets.shape[:2]
-    out = np.zeros(num_vertices)
+    out = np.full(num_vertices, np.nan)
     if n < 2 or features.shape[1] == 0:
         return out
     zf, _ = _standardise(features)
@@ -104,8 +107,9 @@ def correlation_map(features: np.ndarray, offsets: np.ndarray, chunk: int = 2048
         motion_std[lo:lo + chunk] = std
         zm = m / np.where(std > 0, std, 1.0)
         out[lo:lo + chunk] = np.abs(zf.T @ zm / n).max(axis=0)
-    out[motion_std <= STATIC * max(float(motion_std.max()), 1e-300)] = 0.0
-    return np.clip(out, 0.0, 1.0)
+    out = np.clip(out, 0.0, 1.0)
+    out[motion_std <= STATIC * max(float(motion_std.max()), 1e-300)] = np.nan
+    return out
 
 
 def upper_face_activation(offsets: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -163,7 +167,8 @@ def _pyplot():
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Save a matplotlib figure as PNG atomically; above MAX_PNG_BYTES, with a 256-colour palette."""
+    """Save a matplotlib figure as PNG atomically; above MAX_PNG_BYTES, with a dithered 256-colour palette
+    (about half the size: a 1200 x 720 figure of two shaded faces takes 150 KB instead of 340 KB)."""
     from PIL import Image  # matplotlib's own dependency
 
     buf = io.BytesIO()
@@ -172,9 +177,10 @@ def save_figure(fig, path: Path) -> Path:
     data = buf.getvalue()
     if len(data) > MAX_PNG_BYTES:
         image = Image.open(io.BytesIO(data)).convert("RGB")
-        small = io.BytesIO()
-        image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
-            small, format="png", optimize=True)
+        palette = image.quantize(256, method=Image.Quantize.FASTOCTREE)
+        small = io.BytesIO()  # dithered: no banding in shaded faces and colour bars
+        image.quantize(palette=palette, dither=Image.Dither.FLOYDSTEINBERG).save(small, format="png",
+                                                                                 optimize=True)
         data = small.getvalue()
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
@@ -185,7 +191,8 @@ def _face_image(template, values: np.ndarray, cmap) -> np.ndarray:
     """The template's front view painted with cmap(values), cropped to the face plus a small margin."""
     from facegen.render import render_image
 
-    colors = np.asarray(cmap(np.clip(values, 0.0, 1.0))[:, :3], np.float32)
+    colors = np.asarray(cmap(np.clip(np.nan_to_num(values), 0.0, 1.0))[:, :3], np.float32)
+    colors[~np.isfinite(values)] = STATIC_GREY
     image = render_image(template.vertices, template.faces, size=FACE_SIZE, views=("front",), colors=colors)
     face = np.abs(image.astype(np.int16) - image[0, 0]).max(axis=2) > 8  # the corner is background
     if not face.any():
@@ -206,7 +213,7 @@ def plot_correlation(maps: dict[str, np.ndarray], template, path: Path, title: s
     cmap = colormaps[CORRELATION_CMAP]
     names = [m for m in ("audio", "text") if m in maps]
     width = FIG_WIDTH if len(names) == 2 else FIG_WIDTH * 0.58
-    fig, axes = plt.subplots(1, len(names), figsize=(width, 6.6), squeeze=False,
+    fig, axes = plt.subplots(1, len(names), figsize=(width, 7.2), squeeze=False,
                              gridspec_kw={"wspace": 0.04})
     label = {"audio": "audio encoder features Ha", "text": "text encoder features Hl"}
     for ax, name in zip(axes[0], names, strict=True):
@@ -216,7 +223,9 @@ def plot_correlation(maps: dict[str, np.ndarray], template, path: Path, title: s
                      f"upper face {s['upper_face']:.2f}, all {s['all']:.2f}", fontsize=11)
         ax.set_xticks([])
         ax.set_yticks([])
-        ax.set_xlabel("front view", fontsize=9)
+        still = int(np.count_nonzero(~np.isfinite(maps[name])))
+        ax.set_xlabel("front view" + (f"; grey: {still} vertices that do not move" if still else ""),
+                      fontsize=9)
     bar = fig.colorbar(ScalarMappable(Normalize(0.0, 1.0), cmap), ax=axes[0].tolist(), fraction=0.035,
                        pad=0.02)
     bar.set_label("max over feature dimensions of |Pearson r| with the vertex's motion")
@@ -237,13 +246,14 @@ def plot_tsne(points: np.ndarray, activation: np.ndarray, sentence_of: np.ndarra
     plt = _pyplot()
     cmap = colormaps[ACTIVATION_CMAP]
     norm = Normalize(float(activation.min()), float(activation.max()) or 1.0)
-    fig, (left, right) = plt.subplots(1, 2, figsize=(FIG_WIDTH, 5.8))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(FIG_WIDTH, 6.4))
     sc = left.scatter(points[:, 0], points[:, 1], c=activation, cmap=cmap, norm=norm, s=9, linewidths=0)
     for k, name in enumerate(names):
-        mid = np.median(points[sentence_of == k], axis=0)
+        mine = points[sentence_of == k]
+        mid = mine[np.argmin(np.square(mine - np.median(mine, axis=0)).sum(axis=1))]  # a point near the middle
         left.annotate(name.split("_")[-1], mid, fontsize=9, color="0.15", ha="center", va="center",
                       bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "0.6", "alpha": 0.8})
-    left.set_title(f"all {len(names)} sentences (labels: sentence at its points' median)", fontsize=10)
+    left.set_title(f"all {len(names)} sentences (each labelled at its most central point)", fontsize=10)
 
     mine = points[sentence_of == chosen]
     act = activation[sentence_of == chosen]
@@ -269,7 +279,7 @@ def plot_tsne(points: np.ndarray, activation: np.ndarray, sentence_of: np.ndarra
     bar = fig.colorbar(sc, ax=[left, right], fraction=0.03, pad=0.02)
     bar.set_label("upper-face activation: mean ‖offset‖ of upper-face vertices (mesh units)")
     fig.suptitle(title, fontsize=12)
-    fig.subplots_adjust(left=0.06, right=0.86, top=0.86, bottom=0.1, wspace=0.2)
+    fig.subplots_adjust(left=0.06, right=0.86, top=0.81, bottom=0.09, wspace=0.2)
     return save_figure(fig, path)
 
 
@@ -310,9 +320,14 @@ def plot_loss_curves(history: Sequence[dict], path: str | os.PathLike, title: st
 # ----------------------------------------------------------------------------------------------- API
 def correlation_summary(maps: dict[str, np.ndarray], dims: dict[str, int], lips: np.ndarray,
                         upper: np.ndarray) -> dict[str, dict[str, float]]:
-    """Mean |r| over the lip region, the upper-face region and all vertices, per modality."""
-    return {m: {"lips": float(r[lips].mean()), "upper_face": float(r[upper].mean()), "all": float(r.mean()),
-                "dims": int(dims[m])} for m, r in maps.items()}
+    """Mean |r| over the moving vertices (see `correlation_map`) of the lip region, the upper-face region
+    and the whole mesh, per modality (NaN for a region that does not move)."""
+    def mean(r: np.ndarray) -> float:
+        r = r[np.isfinite(r)]
+        return float(r.mean()) if r.size else float("nan")
+
+    return {m: {"lips": mean(r[lips]), "upper_face": mean(r[upper]), "all": mean(r), "dims": int(dims[m])}
+            for m, r in maps.items()}
 
 
 def tsne(features: np.ndarray, seed: int = 0) -> np.ndarray:
@@ -385,10 +400,13 @@ def write_plots(
         "sequences": len(pred.items), "frames": pred.frames,
         "statistic": "per vertex: max over encoder feature dimensions of |Pearson r| between the feature and "
                      "the predicted offset projected on the vertex's first principal axis of motion, over "
-                     "all frames of the split; regions: mean over their vertices",
+                     "all frames of the split; regions: mean over their vertices that move (null: none "
+                     "moves)",
         "regions": {"lips": len(run.lips), "upper_face": len(run.upper),
                     "all": int(run.bundle.template.num_vertices)},
-        "mean_abs_r": {m: {k: v for k, v in s.items() if k != "dims"} for m, s in summary.items()},
+        "moving_vertices": {m: int(np.isfinite(r).sum()) for m, r in maps.items()},
+        "mean_abs_r": {m: {k: (v if np.isfinite(v) else None) for k, v in s.items() if k != "dims"}
+                       for m, s in summary.items()},
         "skipped": [list(s) for s in run.dataset.skipped],
     }
     json_path = out_dir / "fig3_correlation.json"
@@ -428,10 +446,10 @@ def _fig4(run, pred: Predictions, path: Path, name: str, split: str, say) -> Pat
         say(f"no word timings for {chosen.name} ({exc}): fig4 right panel without words")
         words = []
     owner = word_frames(words, chosen.num_frames, run.bundle.features.fps)
-    text = " ".join(w.text for w in words)
-    text = text if len(text) <= 70 else text[:67] + "..."
+    text = textwrap.shorten(" ".join(w.text for w in words), 110, placeholder=" ...")
+    text = "\n".join(textwrap.wrap(f"\u201c{text}\u201d", 60))
     return plot_tsne(points, activation, sentence_of, [pred.items[i].name for i in picks], 0,
                      [w.text for w in words], owner, path,
                      f"t-SNE of the text encoder outputs Hl, one point per frame: subject {subject}, "
                      f"split {split}\n{name}",
-                     f"{chosen.name}: \u201c{text}\u201d" if text else chosen.name)
+                     f"one sentence, {chosen.name}:\n{text}" if text else f"one sentence, {chosen.name}")

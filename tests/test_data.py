@@ -23,6 +23,7 @@ from facegen.data import (
     import_biwi,
     parse_numbers,
     read_templates_pkl,
+    read_transcripts,
     read_vl,
     write_templates_pkl,
     write_vl,
@@ -464,9 +465,29 @@ def test_import_biwi_writes_the_community_layout(raw_biwi, tmp_path):
     np.testing.assert_allclose(ds.mesh.vertices, (templates["F2"] + templates["F3"]) / 2, atol=1e-5)
 
 
+def test_transcripts_from_a_file_or_a_folder(tmp_path):
+    (tmp_path / "list.txt").write_text("The first one.\nThe second one.\n")
+    assert read_transcripts(tmp_path / "list.txt") == {1: "The first one.", 2: "The second one."}
+    (tmp_path / "numbered.txt").write_text("e02 Two.\n1: One.\n")
+    assert read_transcripts(tmp_path / "numbered.txt") == {2: "Two.", 1: "One."}
+    folder = tmp_path / "texts"
+    folder.mkdir()
+    (folder / "e01.txt").write_text("Open the\nwindow.\n")
+    (folder / "F2_e01.txt").write_text("Open the door.")
+    assert read_transcripts(folder) == {1: "Open the window.", "F2_e01": "Open the door."}
+    with pytest.raises(FacegenError, match="do not exist"):
+        read_transcripts(tmp_path / "nope.txt")
+
+
 def test_import_biwi_template_normalisation(raw_biwi, tmp_path):
     out = tmp_path / "B2"
-    import_biwi(raw_biwi, out, normalisation="template", subjects=["F2"], warn=None)
+    texts = tmp_path / "texts"
+    texts.mkdir()
+    (texts / "e01.txt").write_text("Open the window.")
+    (texts / "F2_e02.txt").write_text("Only for F2.")
+    import_biwi(raw_biwi, out, normalisation="template", subjects=["F2"], transcripts=texts, warn=None)
+    assert (out / "text" / "F2_e01.txt").read_text().strip() == "Open the window."
+    assert (out / "text" / "F2_e02.txt").read_text().strip() == "Only for F2."
     assert sorted(read_templates_pkl(out / "templates.pkl")) == ["F2"]
     template = read_templates_pkl(out / "templates.pkl")["F2"]
     v = np.load(out / "vertices_npy" / "F2_e01.npy").reshape(-1, 200, 3)

@@ -14,7 +14,14 @@ from test_train import _train
 
 from facegen.align import Word
 from facegen.bundle import load_bundle
-from facegen.plots import correlation_map, principal_motion, upper_face_activation, word_frames, write_plots
+from facegen.plots import (
+    correlation_map,
+    correlation_summary,
+    principal_motion,
+    upper_face_activation,
+    word_frames,
+    write_plots,
+)
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -46,17 +53,27 @@ def test_a_prediction_linear_in_one_text_feature_has_r_one_on_its_moving_vertice
     assert r.shape == (30,)
     np.testing.assert_allclose(r[:10], 1.0, atol=1e-9)
     assert r[10:20].max() < 0.35  # max over 16 independent features of |r| at n = 300: ~0.1-0.25
-    np.testing.assert_array_equal(r[20:30], 0.0)
+    assert np.isnan(r[20:30]).all()  # no motion: undefined
     # a little noise lowers r as the theory says: r = 1 / sqrt(1 + noise² / signal²)
     signal = 2 * text[:, 5]
     noisy = signal[:, None, None] * np.ones((1, 1, 3)) + rng.normal(scale=1.0, size=(n, 1, 3)) * [1, 0, 0]
     expect = abs(np.corrcoef(signal, noisy[:, 0] @ principal_axis(noisy[:, 0]))[0, 1])
     assert correlation_map(text, noisy)[0] == pytest.approx(expect, rel=1e-9)
     assert 0.8 < expect < 0.99
+    text[:, 5] = 0.0  # a constant feature correlates with nothing
+    r = correlation_map(text, offsets)
+    assert r[:10].max() < 0.35 and np.isfinite(r[:20]).all()
 
 
 def principal_axis(x: np.ndarray) -> np.ndarray:
     return np.linalg.eigh(np.cov(x.T, bias=True))[1][:, -1]
+
+
+def test_region_means_leave_out_vertices_that_do_not_move():
+    r = np.array([0.2, 0.4, np.nan, 0.9, np.nan])
+    summary = correlation_summary({"text": r}, {"text": 64}, lips=np.array([0, 1, 2]), upper=np.array([4]))
+    assert summary["text"]["lips"] == pytest.approx(0.3) and np.isnan(summary["text"]["upper_face"])
+    assert summary["text"]["all"] == pytest.approx(0.5) and summary["text"]["dims"] == 64
 
 
 def test_correlation_map_equals_a_per_vertex_reference_in_chunks():
