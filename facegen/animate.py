@@ -174,12 +174,15 @@ def animate(
     always see.
     """
     PROFILE.mark("animate_start")
-    dev = select_device(device, progress)
+    notes: list[str] = []
+    dev = select_device(device, notes.append)  # an unusable explicit device fails before any work
     if not isinstance(bundle, Bundle):
         with PROFILE.stage("model_load"):
             bundle = load_bundle(bundle)
     clip = prepare_clip(audio, bundle=bundle, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                         template=template, text_model=text_model, progress=progress, warn=warn)
+    for note in notes:  # "auto" fell back to the CPU: said once the inputs are known to be good
+        progress(note)
     with PROFILE.stage("inference"):
         frames = predict_frames(bundle, clip.mel, clip.text_features, clip.speaker,
                                 template=clip.mesh.vertices, device=dev)

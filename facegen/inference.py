@@ -311,6 +311,15 @@ class FrameStream:
     def materialize(self) -> np.ndarray:
         return np.asarray(self)
 
+    def factors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(states [T, H], weight [3V, H], base [3V]) with frames.reshape(T, -1) == states @ weight.T + base.
+
+        Every frame lies in an H-dimensional (256) affine subspace, so a PCA of the frames (morph targets
+        for .glb / USD blendshapes) can be computed exactly from these in O((T + V) x H) memory."""
+        if self._torch:
+            return (self._states.cpu().numpy(), self._weight.cpu().numpy(), self._base.cpu().numpy())
+        return self._states, self._weight, self._base
+
     def __repr__(self) -> str:
         return f"FrameStream(shape={self.shape}, block_frames={self.block_frames})"
 

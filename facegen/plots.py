@@ -2,12 +2,12 @@
 
 - **fig3_correlation.png** (the paper's Fig. 3) and **fig3_correlation.json**: how strongly each vertex's
   predicted motion follows the audio-encoder features Ha and the text-encoder features Hl, painted on
-  the template (front view, blue = low, red = high). The statistic is `correlation_map`: per vertex, the
-  largest |Pearson r| between one encoder feature and the vertex's motion along its main direction. The
-  JSON holds its mean over the lip region (lve.txt), the upper-face region (fdd.txt) and all vertices,
-  per modality.
+  the template (front view, blue = low, red = high; grey: vertices the model never moves). The statistic
+  is `correlation_map`: per vertex, the largest |Pearson r| between one encoder feature and the vertex's
+  motion along its main direction. The JSON holds its mean over the moving vertices of the lip region
+  (lve.txt), of the upper-face region (fdd.txt) and of the whole mesh, per modality.
 - **fig4_tsne.png** (the paper's Fig. 4): t-SNE of the per-frame text-encoder outputs of every sentence of
-  one subject of the split (left; each sentence's name at its points' median), coloured by the frame's
+  one subject of the split (left; each sentence named at its most central point), coloured by the frame's
   upper-face activation — our stand-in for the paper's AU5 (upper lid raiser) intensity: the mean over
   the upper-face vertices of the predicted displacement norm ‖offset‖ from the subject's neutral face, in
   mesh units. Right: one sentence of that subject, its frames joined in time order, each word written at
@@ -88,6 +88,10 @@ def correlation_map(features: np.ndarray, offsets: np.ndarray, chunk: int = 2048
 
     Vectorised: with Z_f [N, D] and Z_m [N, V] the standardised columns, r = Z_fᵀ Z_m / N, one matrix
     product per chunk of vertices (float64; memory ~ N × chunk × 3 × 8 bytes).
+
+    The max over D dimensions rises a little with D even for unrelated signals (about sqrt(2 ln D / N)
+    for independent noise: 0.06 for D = 128, N = 2,800), so compare modalities region by region rather
+    than in absolute terms.
     """
     features = np.asarray(features)
     offsets = np.asarray(offsets)
@@ -250,7 +254,7 @@ def plot_tsne(points: np.ndarray, activation: np.ndarray, sentence_of: np.ndarra
     sc = left.scatter(points[:, 0], points[:, 1], c=activation, cmap=cmap, norm=norm, s=9, linewidths=0)
     for k, name in enumerate(names):
         mine = points[sentence_of == k]
-        mid = mine[np.argmin(np.square(mine - np.median(mine, axis=0)).sum(axis=1))]  # a point near the middle
+        mid = mine[np.argmin(np.square(mine - np.median(mine, axis=0)).sum(axis=1))]  # the most central
         left.annotate(name.split("_")[-1], mid, fontsize=9, color="0.15", ha="center", va="center",
                       bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "0.6", "alpha": 0.8})
     left.set_title(f"all {len(names)} sentences (each labelled at its most central point)", fontsize=10)
@@ -442,7 +446,7 @@ def _fig4(run, pred: Predictions, path: Path, name: str, split: str, say) -> Pat
     chosen = pred.items[picks[0]]
     try:
         words = _words(run.dataset, chosen)
-    except Exception as exc:  # noqa: BLE001 - no timings: the figure is still useful without labels
+    except Exception as exc:  # noqa: BLE001 - without timings the figure is still useful, unlabelled
         say(f"no word timings for {chosen.name} ({exc}): fig4 right panel without words")
         words = []
     owner = word_frames(words, chosen.num_frames, run.bundle.features.fps)

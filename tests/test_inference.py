@@ -84,6 +84,27 @@ def test_blockwise_equals_one_pass_at_seams(bundle, face):
     assert frames.blocks_computed == -(-T // 128)
 
 
+def test_default_model_blockwise_equals_one_pass(clips):
+    """The shipped (trained) model on real speech features: block-wise output == one pass."""
+    from facegen.audio import load_audio, mel_features
+    from facegen.bundle import default_bundle_path, load_bundle
+
+    if not default_bundle_path().is_file():
+        pytest.skip("the built-in default model is not built yet")
+    bundle = load_bundle()
+    wav = clips[1][2][0]
+    mel = mel_features(*load_audio(wav), bundle.features, bundle.mel_filters)
+    mel = np.concatenate([mel] * 4)  # ~15 s: several blocks
+    text = features(len(mel), seed=2)[1] * 0.3
+    ref = bundle.template.vertices[None] + one_pass(bundle, mel, text, 2)
+    states = decoder_states(bundle, mel, text, 2, fusion_frames=50)
+    got = np.asarray(frame_stream(bundle, states, bundle.template.vertices, block_frames=64))
+    err = np.linalg.norm(got - ref, axis=-1).max() / bundle.template.size
+    motion = np.linalg.norm(ref - bundle.template.vertices, axis=-1).max() / bundle.template.size
+    print(f"default model, {len(mel)} frames: largest difference {err:.2e} of the face size (motion {motion:.3f})")
+    assert motion > 1e-3 and err <= 1e-5
+
+
 def test_frame_stream_indexing(bundle, face):
     mel, text = features(300, seed=1)
     frames = predict_frames(bundle, mel, text, 0, template=face.vertices, block_frames=64)
