@@ -1,20 +1,26 @@
 """Inference: the network on a clip's features — device choice, bounded-memory forward, frame streams,
-batches of clips.
+batches of clips, and stage profiles (FACEGEN_PROFILE=1).
 
 Where the memory goes: per frame the network carries 128 mel bands, 384 text features, 8,385 fused
 features and 256 decoder states, but outputs 3V = 70,110 numbers. A 10-minute clip (15,000 frames) has
 4.2 GB of output and only 15 MB of decoder states. So the forward runs in two parts:
 
 1. `decoder_states`: the encoders (convolutions, text LSTM) and the decoder BiLSTMs run over the whole
-   clip at once, exactly as in one pass (no seams: every recurrence sees the whole clip); the only wide
-   step, tensor fusion + the decoder's first FC, runs in blocks of frames. Memory O(T x 256).
+   clip at once, exactly as in one pass; the only wide step, tensor fusion + the decoder's first FC, runs
+   in blocks of frames. Memory O(T x 256), time linear in T. Overlapping windows for the recurrences are
+   not needed: their state is this small, and a whole-clip pass has no seams at all (block-wise output
+   equals one pass to float rounding, ~1e-7 of the face size; tests/test_inference.py).
 2. `FrameStream`: the output layer, frames = states @ W.T + (bias + template), computed block by block
    when a writer asks for frames (`blocks()`, indexing) into float32 arrays, with the template added in
    the same pass. Memory: one block (256 frames = 72 MB) at a time.
 
-On the CPU the output layer runs through numpy's BLAS (OpenBLAS): on the AMD EPYC this was measured on it
+On the CPU the output layer runs through numpy's BLAS (OpenBLAS): on the AMD EPYC of the benchmarks it
 is about twice as fast as torch's MKL sgemm for this shape (benchmarks/RESULTS.md). On CUDA both parts
 run on the GPU and blocks are copied back.
+
+Long clips in bounded memory need writers that read a FrameStream block by block (.npy can; a USD layer
+keeps every authored `points` sample in memory until it is saved — 1.04 x the frames' size, measured —
+so a points .usdc of 10 minutes needs ~4.4 GB whatever the inference does).
 """
 
 from __future__ import annotations
@@ -349,13 +355,6 @@ def predict_offsets(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: i
     return np.asarray(predict_frames(bundle, mel, text, speaker, device=device))
 
 
-def prepare_threads() -> None:
-    """Denormals flushed (random-like weights produce them; they slow CPU kernels many times)."""
-    import torch
-
-    torch.set_flush_denormal(True)
-
-
 # --------------------------------------------------------------------------------------------------
 # many clips
 
@@ -395,8 +394,11 @@ def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = No
 
     Relative audio/text_file/alignment paths are relative to the manifest's folder; relative outputs to
     `outdir` (default: the manifest's folder). A missing output is the audio's name with `default_ext`.
+    A row with neither text nor alignment has its words recognised (as `facegen animate` without --text).
     """
     import csv
+
+    from facegen.exchange import format_module
 
     path = Path(path)
     try:
@@ -435,8 +437,12 @@ def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = No
         if text and alignment:
             raise FacegenError(f"manifest {path}, row {n}: give text or alignment, not both")
         output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
+        try:
+            format_module(output)
+        except FacegenError as exc:
+            raise FacegenError(f"manifest {path}, row {n}: {exc}") from None
         jobs.append(Job(audio=audio, output=out_base / output, text=text, alignment=alignment,
-                        speaker=row.get("speaker") or None, no_text=not text and alignment is None))
+                        speaker=row.get("speaker") or None))
     if not jobs:
         raise FacegenError(f"manifest {path} lists no clips")
     return jobs

@@ -267,11 +267,15 @@ def plot_tsne(points: np.ndarray, activation: np.ndarray, sentence_of: np.ndarra
                   linewidths=0, zorder=2)
     right.scatter(mine[~spoken, 0], mine[~spoken, 1], c=act[~spoken], cmap=cmap, norm=norm, s=34,
                   marker="x", linewidths=1.2, zorder=2)
+    right.margins(0.06)
+    middle = (mine[:, 0].min() + mine[:, 0].max()) / 2
     for i, word in enumerate(words):
         frames = np.flatnonzero(owner == i)
         if len(frames):
             p = mine[frames[len(frames) // 2]]
-            right.annotate(word, p, xytext=(4, 4), textcoords="offset points", fontsize=9, zorder=3,
+            east = p[0] < middle  # labels point towards the middle, so none leaves the axes
+            right.annotate(word, p, xytext=(5 if east else -5, 4), textcoords="offset points", fontsize=9,
+                           ha="left" if east else "right", zorder=3,
                            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7})
     right.legend(handles=[Line2D([], [], marker="o", ls="", color="0.4", label="frame inside a word"),
                           Line2D([], [], marker="x", ls="", color="0.4", label="frame without a word")],

@@ -70,6 +70,21 @@ VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
 FIELD_OF_VIEW = 20.0  # degrees, vertical and horizontal (square views)
 FILL = 0.84  # the template fills this fraction of a view's width or height
 SKIN = (0.86, 0.69, 0.60)  # sRGB
+REGION_COLORS = {"lips": (0.72, 0.42, 0.42), "left_eyeball": (0.93, 0.93, 0.90),
+                 "right_eyeball": (0.93, 0.93, 0.90), "mouth_cavity": (0.35, 0.16, 0.16)}  # sRGB
+
+
+def face_colors(regions: dict[str, np.ndarray] | None, num_vertices: int) -> np.ndarray | None:
+    """Per-vertex sRGB colours: skin, with lips, eyeballs and mouth cavity tinted when the mesh names them
+    (facegen's procedural face does; BIWI-topology bundles name only lips and upper face)."""
+    named = [(k, v) for k, v in (regions or {}).items() if k in REGION_COLORS]
+    if not named:
+        return None
+    colors = np.tile(np.asarray(SKIN, np.float32), (num_vertices, 1))
+    for name, idx in named:
+        idx = np.asarray(idx)
+        colors[idx[(idx >= 0) & (idx < num_vertices)]] = REGION_COLORS[name]
+    return colors
 BACKGROUND = (0.08, 0.09, 0.11)  # sRGB
 TEXT = (0.85, 0.86, 0.88)  # sRGB
 HEAT_STOPS = ((0.78, 0.80, 0.84), (0.99, 0.87, 0.33), (0.96, 0.50, 0.12), (0.78, 0.07, 0.07))  # sRGB, 0 → 1
@@ -881,9 +896,11 @@ def render_animation(
     height = renderer.size
     threads = default_threads() if threads is None else max(1, int(threads))
 
+    base_colors = face_colors(anim.regions, anim.num_vertices)
+
     def render_one(t: int) -> np.ndarray:
         frame = np.empty((height, width, 3), np.uint8)
-        renderer.render_into(anim.vertices[t], frame[:, : renderer.width])
+        renderer.render_into(anim.vertices[t], frame[:, : renderer.width], base_colors)
         if compare is not None:
             colors = heat_colors(_vertex_errors(anim, compare, t), vmax)
             renderer.render_into(compare.vertices[t], frame[:, renderer.width :], colors)
@@ -1052,5 +1069,6 @@ def render_still(
         if not 0 <= frame < input.num_frames:
             raise FacegenError(f"frame {frame} is outside the clip's 0..{input.num_frames - 1}")
         vertices, faces, template = input.vertices[frame], input.faces, input.template
-    image = render_image(vertices, faces, template, size=size, views=check_views(views))
+    colors = face_colors(input.regions, len(vertices))
+    image = render_image(vertices, faces, template, size=size, views=check_views(views), colors=colors)
     return write_png(image, path)

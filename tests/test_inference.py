@@ -244,6 +244,22 @@ def test_batch_equals_individual(bundle, clips):
         assert anim.metadata["words"] == single.metadata["words"]
 
 
+def test_run_batch_writes_every_output_and_reports_failures(bundle, clips, tmp_path):
+    from facegen.inference import run_batch
+
+    _, items = clips
+    jobs = [Job(audio=wav, output=tmp_path / "out" / f"{wav.stem}.npy", alignment=words)
+            for wav, words in items[:2]]
+    jobs.append(Job(audio=items[2][0], output=tmp_path / "out" / "bad.npy", alignment=items[2][1], speaker="Z9"))
+    said = []
+    results = run_batch(jobs, bundle=bundle, device="cpu", say=said.append)
+    assert [r.ok for r in results] == [True, True, False] and "unknown speaker" in results[2].error
+    for r in results[:2]:
+        assert r.files == [r.job.output, r.job.output.with_suffix(".wav")]
+        assert np.load(r.job.output).shape == (r.frames, 3 * 23370)
+    assert not (tmp_path / "out" / "bad.npy").exists() and len(said) == 3 and said[0].startswith("[1/3]")
+
+
 def test_read_manifest(tmp_path):
     (tmp_path / "a.txt").write_text("Hello there.")
     (tmp_path / "m.csv").write_text("audio,text,text_file,alignment,speaker,output\n"
@@ -256,13 +272,15 @@ def test_read_manifest(tmp_path):
     assert [j.output for j in jobs] == [tmp_path / "o" / n for n in ("out/a.glb", "b.usdc", "c.npy", "d.usdc")]
     assert [j.text for j in jobs] == ["Hello there.", "Good morning", None, None]
     assert jobs[2].alignment == tmp_path / "c.json" and [j.speaker for j in jobs] == ["F2", "1", None, None]
-    assert [j.no_text for j in jobs] == [False, False, False, True]
     (tmp_path / "m.json").write_text(json.dumps({"jobs": [{"audio": "a.wav", "text": "Hi", "output": "a.usda"}]}))
     (job,) = read_manifest(tmp_path / "m.json")
     assert job.output == tmp_path / "a.usda" and job.text == "Hi"
     (tmp_path / "bad.csv").write_text("audio,words\na.wav,hi\n")
     with pytest.raises(FacegenError, match="unknown column"):
         read_manifest(tmp_path / "bad.csv")
+    (tmp_path / "bad2.csv").write_text("audio,output\na.wav,a.fbx\n")
+    with pytest.raises(FacegenError, match="row 1.*unknown extension"):
+        read_manifest(tmp_path / "bad2.csv")
 
 
 def test_profile_env_prints_stage_timings(bundle, clips, tmp_path):
