@@ -182,6 +182,8 @@ def info(bundle, as_json):
         f"regions        {', '.join(f'{k} ({v} vertices)' for k, v in meta.get('regions', {}).items()) or 'none'}",
     ]
     for k, v in meta.get("provenance", {}).items():
+        if k == "history":
+            v = f"{len(v)} epochs of train/val loss (see --json)"
         lines.append(f"{k:<14} {json.dumps(v) if isinstance(v, dict | list) else v}")
     click.echo("\n".join(lines))
 
@@ -302,7 +304,8 @@ def evaluate(bundle, data, split, text_model, device, train_subjects, test_subje
     if plots:
         from facegen.plots import write_plots
 
-        for path in write_plots(bundle, data, plots, split=split, splits=splits, text_model_path=text_model):
+        for path in write_plots(bundle, data, plots, split=split, splits=splits, text_model_path=text_model,
+                                device=device, quiet=quiet):
             click.echo(f"facegen: wrote {path}", err=True)
 
 
