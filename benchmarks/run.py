@@ -169,7 +169,7 @@ def model_path(folder: Path) -> tuple[Path, str]:
 
 def run_child(args: list[str], env: dict | None = None, timeout: float = 1800) -> dict:
     """Run a command with FACEGEN_PROFILE=1; wall time, the profile JSON (if printed), return code."""
-    env = dict(os.environ, FACEGEN_PROFILE="1", **(env or {}))
+    env = {**os.environ, "FACEGEN_PROFILE": "1", **(env or {})}
     start = time.time()
     proc = subprocess.run(args, capture_output=True, text=True, env=env, timeout=timeout, check=False)
     wall = time.time() - start
@@ -348,8 +348,7 @@ def time_long(folder: Path, clip: tuple[Path, Path, float], model: Path) -> dict
     script = folder / "long.py"
     script.write_text(LONG_SCRIPT)
     out = folder / f"{clip[0].stem}.npy"
-    r = run_child([sys.executable, str(script), str(clip[0]), str(clip[1]), str(model), str(out)],
-                  env={"FACEGEN_PROFILE": "1"})
+    r = run_child([sys.executable, str(script), str(clip[0]), str(clip[1]), str(model), str(out)])
     if r["returncode"] != 0:
         return {"error": "failed"}
     result = json.loads(r["stdout"].strip().splitlines()[-1])
@@ -476,6 +475,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-train", action="store_true", help="skip writing and training throughput")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--train-sequences", type=int, default=48)
+    ap.add_argument("--long-minutes", default="3,10", help="lengths of the streaming .npy clips")
+    ap.add_argument("--usd-minutes", type=float, default=3.0, help="length of the in-memory .usdc clip")
     ap.add_argument("--out", type=Path, default=HERE / "RESULTS.md")
     args = ap.parse_args(argv)
     runs = 2 if args.quick else args.runs
@@ -501,18 +502,19 @@ def main(argv: list[str] | None = None) -> int:
         r["forward"] = forward_times(model, clips, runs)
         if not (args.quick or args.no_long):
             r["long"] = {}
-            for minutes in (3, 10):
-                clip = make_clip(folder, 60.0 * minutes, f"clip{minutes}m")
+            for minutes in (float(m) for m in args.long_minutes.split(",")):
+                clip = make_clip(folder, 60.0 * minutes, f"clip{minutes:g}m")
                 x = time_long(folder, clip, model)
-                x.update(audio_seconds=clip[2], path="streaming .npy")
-                r["long"][f"{minutes} min"] = x
-                log(f"long {minutes} min: {x}")
-            wav, txt, seconds = clip3 = make_clip(folder, 180.0, "clip3m_usd")
-            a = time_animate(wav, txt, model, folder / "clip3m.usdc", 1)
-            r["long"]["3 min .usdc"] = {"audio_seconds": seconds, "frames": round(seconds * FPS), "wall": a["wall"],
-                                        "rss_mb": a["rss_mb"], "output_mb": clip3[2] * FPS * 23370 * 12 / 2**20,
-                                        "path": "in memory, .usdc points", "stages": a["stages"]}
-            log(f"3 min usdc: {a['wall']:.1f} s, {a['rss_mb']} MB")
+                x.update(audio_seconds=clip[2], path="streaming .npy (library)")
+                r["long"][f"{minutes:g} min"] = x
+                log(f"long {minutes:g} min: {x}")
+            wav, txt, seconds = make_clip(folder, 60.0 * args.usd_minutes, "clip_usd")
+            a = time_animate(wav, txt, model, folder / "clip_usd.usdc", 1)
+            r["long"][f"{args.usd_minutes:g} min .usdc"] = {
+                "audio_seconds": seconds, "frames": round(seconds * FPS), "wall": a["wall"], "rss_mb": a["rss_mb"],
+                "output_mb": seconds * FPS * 23370 * 12 / 2**20, "path": "`facegen animate`, .usdc points",
+                "stages": a["stages"]}
+            log(f"{args.usd_minutes:g} min usdc: {a['wall']:.1f} s, {a['rss_mb']} MB")
         if not (args.quick or args.no_train):
             r["writing"] = writing_throughput(folder)
             r["train"] = training_speed(args.train_sequences)

@@ -13,7 +13,15 @@ from facegen.animation import Animation
 from facegen.errors import FacegenError
 from facegen.exchange import write_animation
 from facegen.mesh import Mesh, write_mesh
-from facegen.render import BACKGROUND, Renderer, frame_cameras, render, render_animation, render_still
+from facegen.render import (
+    BACKGROUND,
+    Renderer,
+    face_colors,
+    frame_cameras,
+    render,
+    render_animation,
+    render_still,
+)
 
 FPS = 25.0
 RATE = 16000
@@ -305,7 +313,9 @@ def test_still_png_and_identical_renders(grid_mesh, tmp_path):
     reader = imageio_ffmpeg.read_frames(str(path))
     assert tuple(next(reader)["size"]) == (2 * SIZE, SIZE)
     image = np.frombuffer(next(reader), np.uint8).reshape(SIZE, 2 * SIZE, 3)
-    direct = Renderer(grid_mesh.faces, grid_mesh.vertices, SIZE).render(grid_mesh.vertices)
+    colors = face_colors(grid_mesh.regions, grid_mesh.num_vertices)  # the grid names a lips region: tinted
+    assert colors is not None
+    direct = Renderer(grid_mesh.faces, grid_mesh.vertices, SIZE).render(grid_mesh.vertices, colors)
     assert np.array_equal(image, direct)  # PNG is lossless
     assert image.std() > 20
 

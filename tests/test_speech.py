@@ -132,9 +132,10 @@ def pitch_hz(speech: Speech) -> float:
         for i in range(0, len(seg) - 1024, 512):
             frame = seg[i:i + 1024] - seg[i:i + 1024].mean()
             ac = np.correlate(frame, frame, "full")[1023:]
-            lo, hi = sr // 500, sr // 60
+            lo, hi = sr // 500, sr // 40  # 40-500 Hz: a deep variant at pitch 10 goes below 60 Hz
             if ac[0] > 0 and ac[lo:hi].max() > 0.5 * ac[0]:
                 f0s.append(sr / (lo + np.argmax(ac[lo:hi])))
+    assert f0s, "no voiced frame found"
     return float(np.median(f0s))
 
 
