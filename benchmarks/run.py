@@ -39,8 +39,9 @@ REPO = HERE.parent
 BIWI = REPO.parent / "shared" / "biwi" / "BIWI.ply"
 FPS = 25.0
 TARGETS = {"forward_x_realtime": 100.0, "animate_5s_wall": 3.0, "help_wall": 0.5, "long_rss_mb": 2048.0}
+BLOCK_VARIANTS = (128, 256, 1024)  # output blocks timed besides the default (facegen.inference.BLOCK_FRAMES)
 STAGES = ("start-up", "model_load", "audio", "alignment", "text_model_load", "text_features", "audio_features",
-          "inference", "writing")
+          "inference", "writing", "exit")
 
 
 def log(msg: str) -> None:
@@ -199,7 +200,7 @@ def stages_of(run: dict) -> dict:
     marks = prof.get("marks", {})
     if "animate_start" in marks:
         stages["start-up"] = marks["animate_start"] - run["start"]
-    stages["rest"] = run["wall"] - sum(stages.values())  # interpreter exit, speaker/template checks
+    stages["exit"] = run["wall"] - sum(stages.values())  # the rest: mostly interpreter teardown at exit
     return stages
 
 
@@ -271,7 +272,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
     from threadpoolctl import threadpool_limits
 
     from facegen.audio import load_audio, mel_features
-    from facegen.inference import decoder_states, frame_stream
+    from facegen.inference import BLOCK_FRAMES, decoder_states, frame_stream
     from facegen.model import one_hot
 
     samples, sr = load_audio(wav)
@@ -281,7 +282,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
     template = bundle.template.vertices
     buffer = np.empty((T, template.shape[0], 3), np.float32)
 
-    def ours(block: int = 256) -> None:
+    def ours(block: int = BLOCK_FRAMES) -> None:
         frames = frame_stream(bundle, decoder_states(bundle, mel, text, 0), template, block)
         for s in range(0, T, block):
             frames.compute(s, min(s + block, T), out=buffer[s:s + block])
@@ -292,7 +293,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
                                    one_hot(0, bundle.config.num_speakers))
             _ = template[None] + offsets[0].numpy()
 
-    def torch_blocks(block: int = 256) -> None:
+    def torch_blocks(block: int = BLOCK_FRAMES) -> None:
         states = decoder_states(bundle, mel, text, 0)
         fc = bundle.model.fc_out
         flat = torch.from_numpy(buffer.reshape(T, -1))
@@ -306,7 +307,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
     row = {"frames": T, "seconds": seconds, "ours": best_of(ours, runs),
            "states_only": best_of(lambda: decoder_states(bundle, mel, text, 0), runs),
            "one_pass_torch": best_of(one_pass, fewer), "torch_mkl_blocks": best_of(torch_blocks, fewer)}
-    for block in (64, 128, 512):
+    for block in BLOCK_VARIANTS:
         row[f"ours_block_{block}"] = best_of(lambda b=block: ours(b), fewer)
     threads = torch.get_num_threads()
     try:
@@ -423,22 +424,26 @@ def report(r: dict) -> str:
         shares = [f"{st.get(s, 0):.2f} ({100 * st.get(s, 0) / a['wall']:.0f}%)" for s in STAGES]
         lines.append(f"| {name} | {a['audio_seconds']:.1f} | {a['frames']} | {a['wall']:.2f} | "
                      f"{a['audio_seconds'] / a['wall']:.1f} | {fmt(a['rss_mb'], 0)} | " + " | ".join(shares) + " |")
-    lines += ["", f"`facegen --help`: {r['help']['median']:.2f} s (median of runs).", "",
+    lines += ["", ("Stages from FACEGEN_PROFILE=1; start-up = process start to `animate()` (Python, click, torch "
+              "imports); writing = from `animate()` returning to the profile printed at exit (pxr import, the "
+              "file); exit = the rest of the wall time (interpreter teardown of torch/transformers modules)."), "",
+              f"`facegen --help`: {r['help']['median']:.2f} s (median of runs).", "",
               "Slowest imports at start-up (`python -X importtime -c 'import facegen.cli, facegen.animate'`): "
               + ", ".join(f"{n} {s:.2f} s" if s else n for n, s in r["imports"]) + ".", ""]
     lines += ["## Model forward vs. a FaceFormer-class encoder (this process, best of runs, seconds)", "",
               ("Ours = the whole network: encoders, fusion, BiLSTMs and every output frame (template + offsets, "
-               "float32 [T, 23370, 3]). wav2vec2-base = transformers' `Wav2Vec2Model(Wav2Vec2Config())`, random "
+               "float32 [T, 23370, 3]), as facegen.inference runs it: decoder states on one torch thread, output "
+               "blocks of 512 frames on numpy's BLAS (2 threads). wav2vec2-base = transformers' `Wav2Vec2Model(Wav2Vec2Config())`, random "
                "weights, on the same 16 kHz audio: only the audio encoder of FaceFormer/CodeTalker (their "
                "decoders come on top)."), "",
               ("| clip | frames | ours | x real time | states only | one-pass torch forward | torch/MKL output "
-               "blocks | blocks of 64 / 128 / 512 | 1 thread | wav2vec2-base | wav2vec2 / ours |"),
+               "blocks | blocks of 128 / 256 / 1024 | 1 thread | wav2vec2-base | wav2vec2 / ours |"),
               "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, f in r["forward"].items():
+        blocks = " / ".join(f"{f[f'ours_block_{b}']:.3f}" for b in BLOCK_VARIANTS)
         lines.append(f"| {name} | {f['frames']} | {f['ours']:.3f} | {f['seconds'] / f['ours']:.0f} | "
                      f"{f['states_only']:.3f} | {f['one_pass_torch']:.3f} | {f['torch_mkl_blocks']:.3f} | "
-                     f"{f['ours_block_64']:.3f} / {f['ours_block_128']:.3f} / {f['ours_block_512']:.3f} | "
-                     f"{f['ours_1_thread']:.3f} | {f['wav2vec2_base']:.2f} | "
+                     f"{blocks} | {f['ours_1_thread']:.3f} | {f['wav2vec2_base']:.2f} | "
                      f"**{f['wav2vec2_base'] / f['ours']:.1f}x** |")
     if r.get("long"):
         lines += ["", "## Long audio", "", ("| clip | audio s | frames | wall s | s per audio minute | peak RSS MB | "

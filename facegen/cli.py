@@ -220,6 +220,30 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
     sys.exit(0 if report.ok else 1)
 
 
+@cli.command()
+@click.argument("manifest", type=click.Path(dir_okay=False))
+@click.option("--output-dir", "-o", required=True, type=click.Path(file_okay=False),
+              help="Folder for the outputs (rows may name their own output file).")
+@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Model bundle (default: the built-in model).")
+@click.option("--text-model", help="Local folder (or cached id) of the text model.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--batch-size", type=int, default=16, show_default=True, help="Clips run through the network at once.")
+@click.option("--ext", default=".usdc", show_default=True, help="Output format for rows without an output.")
+@click.option("--quiet", "-q", is_flag=True)
+def batch(manifest, output_dir, model, text_model, device, batch_size, ext, quiet):
+    """Animate many clips listed in MANIFEST (CSV or JSON: audio, text|text_file|alignment, speaker, output),
+    loading the model and the text model once. Exit 1 when any clip failed."""
+    from facegen.inference import read_manifest, run_batch
+
+    results = run_batch(read_manifest(manifest, outdir=output_dir, default_ext=ext), bundle=model, device=device,
+                        text_model=text_model, batch_size=batch_size, say=_progress(quiet), warn=_progress(False))
+    for r in results:
+        if not r.ok:
+            click.echo(f"facegen: error: {r.job.audio}: {r.error}", err=True)
+    click.echo(f"{sum(r.ok for r in results)}/{len(results)} clips written to {output_dir}")
+    sys.exit(0 if all(r.ok for r in results) else 1)
+
+
 def _split_options(f):
     for opt in reversed([
         click.option("--train-subjects", help="Training subjects, e.g. F2,F3,F4,M3,M4,M5 (the default)."),

@@ -12,7 +12,7 @@ features and 256 decoder states, but outputs 3V = 70,110 numbers. A 10-minute cl
    equals one pass to float rounding, ~1e-7 of the face size; tests/test_inference.py).
 2. `FrameStream`: the output layer, frames = states @ W.T + (bias + template), computed block by block
    when a writer asks for frames (`blocks()`, indexing) into float32 arrays, with the template added in
-   the same pass. Memory: one block (256 frames = 72 MB) at a time.
+   the same pass. Memory: one block (512 frames = 144 MB) at a time.
 
 On the CPU the output layer runs through numpy's BLAS (OpenBLAS): on the AMD EPYC of the benchmarks it
 is about twice as fast as torch's MKL sgemm for this shape (benchmarks/RESULTS.md). On CUDA both parts
@@ -25,6 +25,7 @@ so a points .usdc of 10 minutes needs ~4.4 GB whatever the inference does).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -38,7 +39,7 @@ import numpy as np
 from facegen.errors import FacegenError
 
 DEVICES = ("auto", "cpu", "cuda")
-BLOCK_FRAMES = 256  # frames per output block (256 x 70,110 float32 = 72 MB)
+BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
 Say = Callable[[str], None]
 
@@ -188,7 +189,7 @@ def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | 
     model = _model_on(bundle, device)
     cfg = model.cfg
     inputs = []
-    with torch.inference_mode():
+    with torch.inference_mode(), _one_thread(device.type == "cpu"):
         for mel, text, speaker in clips:
             T = int(mel.shape[0])
             mel_t = torch.from_numpy(np.ascontiguousarray(mel, np.float32))[None].to(device)
@@ -210,6 +211,24 @@ def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | 
             return [model.lstm(inputs[0][None])[0][0]]
         packed, _ = model.lstm(pack_sequence(inputs, enforce_sorted=False))
         return list(unpack_sequence(packed))
+
+
+@contextlib.contextmanager
+def _one_thread(enabled: bool) -> Iterator[None]:
+    """One torch thread for the decoder states: thousands of small sequential LSTM steps gain little from
+    a second thread (0.095 s vs 0.11-0.13 s for 1500 frames, idle 2-core EPYC) but lose 4-6x when its
+    OpenMP threads sleep between steps (OMP_WAIT_POLICY=PASSIVE) or the cores are busy. The output
+    layer, where the work is, runs on numpy's BLAS threads, which this does not touch."""
+    import torch
+
+    threads = torch.get_num_threads()
+    if enabled and threads > 1:
+        torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
 
 
 class FrameStream:
