@@ -89,9 +89,12 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
 
         check_output(preview)
     progress = _progress(quiet)
+    # writers that read frames block by block: no [T, V, 3] array in memory
+    stream = Path(output).suffix.lower() in (".npy", ".usda", ".usdc", ".usd") and usd_mode != "blendshapes" \
+        and not preview
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
-               bundle=model, template=template, text_model=text_model, device=device, progress=progress,
-               warn=_progress(False))
+               bundle=model, template=template, text_model=text_model, device=device, stream=stream,
+               progress=progress, warn=_progress(False))
     written = write_animation(anim, output, audio_source=audio, **options)
     progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
     if preview:
@@ -374,6 +377,9 @@ def synth(out, subjects, sentences, preset, seed, fps, workers, quiet):
 
 
 def main(argv: list[str] | None = None) -> None:
+    import os
+
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch loads OpenMP: no spinning on busy cores
     argv = sys.argv[1:] if argv is None else argv
     debug = "--debug" in argv
     try:

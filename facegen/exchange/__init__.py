@@ -92,9 +92,9 @@ def read_animation(
 
 def check_animation(anim: Animation) -> None:
     """Refuse an Animation no writer can store: wrong shapes, no frames, bad fps, faces out of range."""
-    vertices = np.asarray(anim.vertices)
+    vertices = anim.vertices if hasattr(anim.vertices, "blocks") else np.asarray(anim.vertices)  # FrameStream: lazy
     faces = np.asarray(anim.faces)
-    if vertices.ndim != 3 or vertices.shape[2] != 3 or vertices.shape[0] == 0 or vertices.shape[1] == 0:
+    if len(vertices.shape) != 3 or vertices.shape[2] != 3 or vertices.shape[0] == 0 or vertices.shape[1] == 0:
         raise FacegenError(f"animation vertices must be [T, V, 3] with T, V > 0, got {list(vertices.shape)}")
     if faces.ndim != 2 or faces.shape[1] != 3 or faces.shape[0] == 0:
         raise FacegenError(f"animation faces must be [F, 3] triangles, got {list(faces.shape)}")

@@ -35,10 +35,15 @@ def write(
 
     check_animation(anim)
     path = Path(path)
-    flat = np.ascontiguousarray(anim.vertices, dtype=np.float32).reshape(anim.num_frames, -1)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav), open(tmp, "wb") as f:
-        np.save(f, flat, allow_pickle=False)
+        if hasattr(anim.vertices, "blocks"):  # a FrameStream (long clips): written block by block
+            shape = (anim.num_frames, 3 * anim.num_vertices)
+            np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": shape})
+            f.writelines(np.ascontiguousarray(block, dtype="<f4").data for _, block in anim.vertices.blocks())
+        else:
+            flat = np.ascontiguousarray(anim.vertices, dtype=np.float32).reshape(anim.num_frames, -1)
+            np.save(f, flat, allow_pickle=False)
     return [path] if wav is None else [path, wav]
 
 

@@ -177,14 +177,18 @@ def _author_samples(layer, anim: Animation) -> None:
     """
     from pxr import Sdf, UsdGeom, Vt
 
-    vertices = np.ascontiguousarray(anim.vertices, dtype=np.float32)
     points = Sdf.Path(MESH_PATH).AppendProperty("points")
     extent = Sdf.Path(MESH_PATH).AppendProperty("extent")
+    if hasattr(anim.vertices, "blocks"):  # a FrameStream: never more than one block besides the layer
+        blocks = anim.vertices.blocks()
+    else:
+        blocks = [(0, np.ascontiguousarray(anim.vertices, dtype=np.float32))]
     with Sdf.ChangeBlock():
-        for i in range(len(vertices)):
-            frame = Vt.Vec3fArray.FromNumpy(vertices[i])
-            layer.SetTimeSample(points, float(i), frame)
-            layer.SetTimeSample(extent, float(i), UsdGeom.PointBased.ComputeExtent(frame))
+        for start, block in blocks:
+            for i in range(len(block)):
+                frame = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(block[i], dtype=np.float32))
+                layer.SetTimeSample(points, float(start + i), frame)
+                layer.SetTimeSample(extent, float(start + i), UsdGeom.PointBased.ComputeExtent(frame))
 
 
 def _usd_dict(values: dict) -> dict:
