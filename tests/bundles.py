@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from facegen.audio import FeatureConfig, mel_filters
@@ -33,3 +34,18 @@ def make_bundle(template: Mesh, path: Path | None = None, *, speakers=("F2", "F3
         save_bundle(bundle, path)
         bundle.path = Path(path)
     return bundle
+
+
+def grid_face(nx: int = 20, ny: int = 10, height: float = 0.5, bend: float = 2.5) -> Mesh:
+    """A curved nx x ny grid standing in for a face (Y up, facing +Z): the bottom three rows are the lips,
+    the top three the upper face."""
+    xs, ys = np.meshgrid(np.linspace(-0.5, 0.5, nx), np.linspace(-height / 2, height / 2, ny))
+    z = 0.1 * np.cos(xs * bend) * np.cos(ys * bend)
+    vertices = np.stack([xs, ys, z], -1).reshape(-1, 3).astype(np.float32)
+    faces = []
+    for j in range(ny - 1):
+        for i in range(nx - 1):
+            a, b, c, d = j * nx + i, j * nx + i + 1, (j + 1) * nx + i, (j + 1) * nx + i + 1
+            faces += [[a, b, d], [a, d, c]]
+    idx = np.arange(nx * ny)
+    return Mesh(vertices, np.asarray(faces, np.int32), {"lips": idx[: nx * 3], "upper_face": idx[-nx * 3:]})

@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -30,17 +29,6 @@ def biwi_template():
 @pytest.fixture(scope="session")
 def grid_mesh():
     """A small 12 x 10 grid face stand-in (120 vertices), Y up, facing +Z."""
-    from facegen.mesh import Mesh
+    from bundles import grid_face
 
-    nx, ny = 12, 10
-    xs, ys = np.meshgrid(np.linspace(-0.5, 0.5, nx), np.linspace(-0.4, 0.4, ny))
-    z = 0.1 * np.cos(xs * 2) * np.cos(ys * 2)
-    vertices = np.stack([xs, ys, z], -1).reshape(-1, 3).astype(np.float32)
-    faces = []
-    for j in range(ny - 1):
-        for i in range(nx - 1):
-            a, b, c, d = j * nx + i, j * nx + i + 1, (j + 1) * nx + i, (j + 1) * nx + i + 1
-            faces += [[a, b, d], [a, d, c]]
-    idx = np.arange(nx * ny)
-    regions = {"lips": idx[: nx * 3], "upper_face": idx[-nx * 3:]}
-    return Mesh(vertices, np.asarray(faces, np.int32), regions)
+    return grid_face(12, 10, height=0.8, bend=2.0)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from bundles import grid_face
 
 from facegen.audio import FeatureConfig, mel_filters
 from facegen.data import (
@@ -38,19 +39,6 @@ TOY_SPLITS = Splits(train_subjects=("F2", "F3"), test_subjects=("F1",), train_se
                     val_sentences="5", test_sentences="6-7")
 WORDS = ["open", "wide", "now"]
 
-
-def grid_face(nx: int = 20, ny: int = 10) -> Mesh:
-    """A 200-vertex curved grid standing in for a face: bottom rows are the lips, top rows the upper face."""
-    xs, ys = np.meshgrid(np.linspace(-0.5, 0.5, nx), np.linspace(-0.25, 0.25, ny))
-    z = 0.1 * np.cos(xs * 2.5) * np.cos(ys * 2.5)
-    vertices = np.stack([xs, ys, z], -1).reshape(-1, 3).astype(np.float32)
-    faces = []
-    for j in range(ny - 1):
-        for i in range(nx - 1):
-            a, b, c, d = j * nx + i, j * nx + i + 1, (j + 1) * nx + i, (j + 1) * nx + i + 1
-            faces += [[a, b, d], [a, d, c]]
-    idx = np.arange(nx * ny)
-    return Mesh(vertices, np.asarray(faces, np.int32), {"lips": idx[: nx * 3], "upper_face": idx[-nx * 3:]})
 
 
 def envelope(t: np.ndarray, sentence: int) -> np.ndarray:
