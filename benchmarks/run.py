@@ -330,7 +330,7 @@ LONG_SCRIPT = """
 import json, sys, time
 import numpy as np
 from facegen.animate import animate
-from facegen.inference import PROFILE, peak_rss_mb
+from facegen.runtime import PROFILE, peak_rss_mb
 wav, txt, model, out = sys.argv[1:5]
 t0 = time.perf_counter()
 anim = animate(wav, text=open(txt).read(), bundle=model, device="cpu", stream=True)

@@ -13,8 +13,9 @@ from facegen.animation import Animation
 from facegen.audio import check_speech, load_audio, mel_features, num_frames
 from facegen.bundle import Bundle, load_bundle
 from facegen.errors import FacegenError
-from facegen.inference import PROFILE, FrameStream, predict_frames, select_device
+from facegen.inference import FrameStream, predict_frames
 from facegen.mesh import Mesh, check_topology, read_mesh
+from facegen.runtime import PROFILE, select_device
 
 Progress = Callable[[str], None]
 LONG_INPUT_SECONDS = 20.0  # stage-by-stage progress is reported for clips at least this long

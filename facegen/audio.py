@@ -20,8 +20,6 @@ import numpy as np
 
 from facegen.errors import FacegenError
 
-AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3", ".aiff", ".aif", ".opus")
-
 
 @dataclass(frozen=True)
 class FeatureConfig:
@@ -57,32 +55,51 @@ def mel_filters(cfg: FeatureConfig) -> np.ndarray:
     return mel(sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin, fmax=cfg.fmax).astype(np.float32)
 
 
-def load_audio(path: str | os.PathLike) -> tuple[np.ndarray, int]:
-    """Read an audio file of any common format, rate, channel count and sample format.
+def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tuple[np.ndarray, int]:
+    """Read audio of any common format, rate, channel count and sample format: a file path, or the bytes of
+    an encoded file (a WAV inside a USDZ package, the MP3 inside a GLB). The one place audio is read.
 
-    Returns mono float32 samples in [-1, 1] at the file's own sample rate.
+    Returns mono float32 samples in [-1, 1] (channels averaged) at the source's own sample rate.
     """
+    import io
+
     import soundfile as sf
 
-    path = Path(path)
-    if not path.exists():
-        raise FacegenError(f"audio file {path} does not exist: check the path")
-    if not path.is_file():
-        raise FacegenError(f"{path} is not a file: pass an audio file (.wav, .flac, .ogg, .mp3)")
+    if isinstance(source, bytes | bytearray | memoryview):
+        name, handle = what or "the embedded audio", io.BytesIO(bytes(source))
+        fix = "write the file again"
+    else:
+        path = Path(source)
+        name, handle, fix = what or str(path), str(path), "pass a WAV, FLAC, OGG or MP3 file"
+        if not path.exists():
+            raise FacegenError(f"audio file {path} does not exist: check the path")
+        if not path.is_file():
+            raise FacegenError(f"{path} is not a file: pass an audio file (.wav, .flac, .ogg, .mp3)")
     try:
-        data, sr = sf.read(str(path), dtype="float32", always_2d=True)
+        data, sr = sf.read(handle, dtype="float32", always_2d=True)
     except sf.LibsndfileError as exc:
         raise FacegenError(
-            f"cannot read {path} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): "
-            "pass a WAV, FLAC, OGG or MP3 file"
+            f"cannot read {name} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): {fix}"
         ) from exc
-    except (OSError, RuntimeError) as exc:
-        raise FacegenError(f"cannot read {path} as audio ({exc}): pass a WAV, FLAC, OGG or MP3 file") from exc
+    except (OSError, RuntimeError, TypeError) as exc:
+        raise FacegenError(f"cannot read {name} as audio ({exc}): {fix}") from exc
     samples = data.mean(axis=1) if data.shape[1] > 1 else data[:, 0]
     samples = np.ascontiguousarray(samples, dtype=np.float32)
     if not np.isfinite(samples).all():
-        raise FacegenError(f"audio file {path} contains NaN or infinite samples: re-export it")
+        raise FacegenError(f"audio {name} contains NaN or infinite samples: re-export it")
     return samples, int(sr)
+
+
+def write_wav(samples: np.ndarray, sample_rate: int, path: str | os.PathLike, subtype: str = "PCM_16") -> Path:
+    """Write mono audio as a WAV file (16-bit PCM by default, samples clipped to [-1, 1]; "FLOAT" keeps
+    them as they are). The one place audio is written; callers that need atomicity pass a temporary path."""
+    import soundfile as sf
+
+    samples = np.asarray(samples, dtype=np.float32).reshape(-1)
+    if subtype.startswith("PCM"):
+        samples = np.clip(samples, -1.0, 1.0)
+    sf.write(str(path), samples, int(sample_rate), subtype=subtype, format="WAV")
+    return Path(path)
 
 
 def resample(samples: np.ndarray, orig_sr: int, target_sr: int) -> np.ndarray:

@@ -37,6 +37,7 @@ import torch
 
 from facegen.data import Dataset, Item, Splits, Warn, check_split, warn_stderr
 from facegen.errors import FacegenError
+from facegen.runtime import select_device
 
 if TYPE_CHECKING:
     from facegen.bundle import Bundle
@@ -164,12 +165,11 @@ def prepare(
     with the bundle's speakers as training subjects.
     """
     from facegen.bundle import load_bundle
-    from facegen.train import resolve_device
 
     check_split(split)
     say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
     bundle = load_bundle(bundle_path)
-    dev = resolve_device(device, say)
+    dev = select_device(device, say, task="evaluation")
     if splits is None:
         known = bundle.provenance.get("split")
         splits = Splits.from_dict(known) if known else Splits(train_subjects=tuple(bundle.speakers),

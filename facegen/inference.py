@@ -28,133 +28,18 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from facegen.errors import FacegenError
+from facegen.runtime import Say, select_device, silent
 
-DEVICES = ("auto", "cpu", "cuda")
 BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
-Say = Callable[[str], None]
-
-
-def _silent(_: str) -> None:
-    pass
-
-
-# --------------------------------------------------------------------------------------------------
-# profiling: FACEGEN_PROFILE=1 prints each stage's seconds as JSON on stderr when the process exits
-
-
-class _Profile:
-    """Stage timings of this process, enabled by the FACEGEN_PROFILE environment variable."""
-
-    def __init__(self) -> None:
-        self.enabled = os.environ.get("FACEGEN_PROFILE", "") not in ("", "0")
-        self.stages: dict[str, float] = {}
-        self.marks: dict[str, float] = {}
-        self._registered = False
-
-    def mark(self, name: str) -> None:
-        """Record the wall-clock time (time.time()) of an event, e.g. "animate_start"."""
-        if self.enabled:
-            self.marks[name] = time.time()
-            self._register()
-
-    def add(self, name: str, seconds: float) -> None:
-        if self.enabled:
-            self.stages[name] = self.stages.get(name, 0.0) + seconds
-            self._register()
-
-    def stage(self, name: str):
-        return _Stage(self, name)
-
-    def _register(self) -> None:
-        if not self._registered:
-            import atexit
-
-            atexit.register(self.report)
-            self._registered = True
-
-    def report(self) -> None:
-        end = time.time()
-        stages = dict(self.stages)
-        if "animate_end" in self.marks:  # the CLI writes the asset after animate() returns
-            stages["writing"] = end - self.marks["animate_end"]
-        payload = {"facegen_profile": {k: round(v, 4) for k, v in stages.items()},
-                   "marks": self.marks, "exit": end,
-                   "heavy_modules": sorted(m for m in HEAVY_MODULES if m in sys.modules)}
-        peak = peak_rss_mb()
-        if peak is not None:
-            payload["max_rss_mb"] = round(peak, 1)
-        sys.stderr.write(json.dumps(payload) + "\n")
-        sys.stderr.flush()
-
-
-class _Stage:
-    def __init__(self, profile: _Profile, name: str) -> None:
-        self.profile, self.name = profile, name
-
-    def __enter__(self) -> None:
-        self.start = time.perf_counter()
-
-    def __exit__(self, *exc) -> None:
-        self.profile.add(self.name, time.perf_counter() - self.start)
-
-
-PROFILE = _Profile()
-HEAVY_MODULES = ("librosa", "numba", "transformers", "pxr", "scipy", "matplotlib", "trimesh")
-
-
-def peak_rss_mb() -> float | None:
-    """This process's peak resident memory in MB: VmHWM on Linux (its own, unlike ru_maxrss, which keeps
-    the parent's peak across fork + exec), else ru_maxrss; None where neither exists."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    try:
-        import resource
-    except ImportError:  # Windows
-        return None
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB elsewhere
-
-
-# --------------------------------------------------------------------------------------------------
-# device
-
-
-def select_device(device: str = "auto", say: Say = _silent, task: str = "inference"):
-    """The torch device for `device`: "cpu", "cuda" (or "cuda:N") or "auto" (cuda when torch sees a GPU).
-
-    "auto" without a GPU runs on the CPU and says so through `say`; an explicit "cuda" without one is a
-    FacegenError (the CLI exits 2).
-    """
-    import torch
-
-    name = str(device).strip().lower()
-    if name not in DEVICES and not name.startswith("cuda:"):
-        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda")
-    if name == "auto":
-        if torch.cuda.is_available():
-            return torch.device("cuda")
-        say(f"no CUDA GPU available: running {task} on the CPU")
-        return torch.device("cpu")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise FacegenError(f"--device {name} was asked for but torch sees no CUDA GPU: use --device cpu (or auto)")
-    return torch.device(name)
-
-
 def _model_on(bundle, device):
     model = bundle.model
     if next(model.parameters()).device != device:
@@ -468,8 +353,8 @@ def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = No
 
 
 def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-                 batch_size: int = 16, window: int = 64, say: Say = _silent,
-                 warn: Say = _silent) -> Iterator[tuple[Job, object]]:
+                 batch_size: int = 16, window: int = 64, say: Say = silent,
+                 warn: Say = silent) -> Iterator[tuple[Job, object]]:
     """Animate many clips with the model and text backend loaded once: yields (job, Animation) or
     (job, FacegenError) for every job, in the input order within windows of `window` jobs.
 
@@ -516,7 +401,7 @@ def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text
 
 
 def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-              batch_size: int = 16, say: Say = _silent, warn: Say = _silent) -> list[JobResult]:
+              batch_size: int = 16, say: Say = silent, warn: Say = silent) -> list[JobResult]:
     """Animate every job and write its output (format from the extension); a clip that fails is
     reported in its JobResult and the others go on. Returns one JobResult per job, in order."""
     from facegen.exchange import write_animation

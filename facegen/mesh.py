@@ -1,4 +1,4 @@
-"""Template meshes: read/write PLY and OBJ, vertex regions, topology fingerprint."""
+"""Template meshes: read/write PLY and OBJ, vertex regions, topology fingerprint, area, normalisation, normals."""
 
 from __future__ import annotations
 
@@ -98,3 +98,38 @@ def check_topology(mesh: Mesh, num_vertices: int, faces: np.ndarray, what: str) 
             f"{what} has the right vertex count but a different face list ({mesh.faces.shape[0]} faces, "
             f"model has {faces.shape[0]}): use a mesh with the model's topology"
         )
+
+
+def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Total triangle area (the community's sum of mixed-Voronoi vertex areas equals it)."""
+    v = np.asarray(vertices, np.float64)
+    e1 = v[faces[:, 1]] - v[faces[:, 0]]
+    e2 = v[faces[:, 2]] - v[faces[:, 0]]
+    return float(0.5 * np.linalg.norm(np.cross(e1, e2), axis=1).sum())
+
+
+def unit_area(vertices: np.ndarray, faces: np.ndarray,
+              reference: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+    """BIWI's normalisation: subtract the mean vertex, divide by the square root of the surface area
+    (float64 out). With `reference` = (mean, sqrt_area), that centre and scale are used instead."""
+    v = np.asarray(vertices, np.float64)
+    if reference is None:
+        v = v - v.mean(axis=0)
+        return v / np.sqrt(surface_area(v, faces))
+    mean, scale = reference
+    return (v - mean) / scale
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (+Z for a vertex in no or only degenerate triangles)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    face_normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    normals = np.zeros_like(v)
+    for corner in range(3):
+        np.add.at(normals, f[:, corner], face_normals)
+    length = np.linalg.norm(normals, axis=1)
+    bad = length < 1e-20
+    normals[bad] = (0.0, 0.0, 1.0)
+    length[bad] = 1.0
+    return (normals / length[:, None]).astype(np.float32)

@@ -45,6 +45,7 @@ from facegen.atomic import atomic_path
 from facegen.data import Dataset, Item, Splits, Warn, warn_stderr
 from facegen.errors import FacegenError
 from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig
+from facegen.runtime import select_device
 
 CHECKPOINT = "checkpoint.safetensors"
 CHECKPOINT_VERSION = 1
@@ -67,21 +68,6 @@ class TrainResult:
     train_sequences: int = 0
     val_sequences: int = 0
     skipped: list[tuple[str, str]] = field(default_factory=list)
-
-
-def resolve_device(device: str, say: Warn) -> torch.device:
-    """"auto" → cuda when available (else a message and cpu); "cuda" without CUDA → FacegenError."""
-    if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
-        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda")
-    if device == "auto":
-        if torch.cuda.is_available():
-            return torch.device("cuda")
-        say("no CUDA GPU available: training on the CPU")
-        return torch.device("cpu")
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        raise FacegenError("--device cuda was asked for but torch sees no CUDA GPU: "
-                           "use --device cpu (or auto)")
-    return torch.device(device)
 
 
 @contextlib.contextmanager
@@ -351,7 +337,7 @@ def train(
                            "-o path")
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else default_checkpoint_dir(out_bundle)
     ckpt_path = ckpt_dir / CHECKPOINT
-    dev = resolve_device(device, say)
+    dev = select_device(device, say, task="training")
     splits = splits or Splits()
 
     from facegen.audio import FeatureConfig, mel_filters

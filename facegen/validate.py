@@ -42,12 +42,13 @@ from pathlib import Path
 
 import numpy as np
 
+from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import npy as npy_format
 from facegen.exchange import usd as usd_format
 from facegen.exchange import usd_skel
 from facegen.exchange import usdz as usdz_format
-from facegen.exchange.wav import read_wav, sidecar_path
+from facegen.exchange.wav import sidecar_path
 from facegen.mesh import Mesh
 
 DEFAULT_MAX_DISPLACEMENT = 0.25
@@ -384,7 +385,7 @@ def _check_values(
 
 
 def _read_audio(
-    report: Report, name: str, path, shown: str, reader=read_wav
+    report: Report, name: str, path, shown: str, reader=load_audio
 ) -> tuple[np.ndarray, int] | None:
     try:
         samples, rate = reader(path)

@@ -29,6 +29,6 @@ def biwi_template():
 @pytest.fixture(scope="session")
 def grid_mesh():
     """A small 12 x 10 grid face stand-in (120 vertices), Y up, facing +Z."""
-    from bundles import grid_face
+    from helpers import grid_face
 
     return grid_face(12, 10, height=0.8, bend=2.0)

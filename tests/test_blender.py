@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_exchange_gltf import rig_clip
+from helpers import rig_clip
 
 from facegen.exchange import read_animation, write_animation
 

@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 import torch
-from bundles import make_bundle
+from helpers import make_bundle
 
 from facegen.bundle import load_bundle, read_metadata, save_bundle
 from facegen.errors import FacegenError

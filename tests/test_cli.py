@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
-from bundles import make_bundle
+from helpers import make_bundle
 
 SENTENCE = "What an excellent room you have, sir. Such expensive furnishings!"
 

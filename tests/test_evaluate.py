@@ -8,8 +8,7 @@ import json
 import numpy as np
 import pytest
 import torch
-from bundles import make_bundle
-from test_data import TOY_SPLITS, grid_face, make_dataset
+from helpers import TOY_SPLITS, grid_face, make_bundle, make_dataset
 
 from facegen.data import Splits
 from facegen.errors import FacegenError

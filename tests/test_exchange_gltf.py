@@ -6,17 +6,16 @@ lips/jaw/lids/brows driven by random phones, with a noise-burst sound exactly T 
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import shutil
 import subprocess
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pygltflib
 import pytest
+from helpers import rig_clip
 
 from facegen.animation import Animation
 from facegen.errors import FacegenError
@@ -25,42 +24,8 @@ from facegen.exchange import gltf, mp3, pca, read_animation, write_animation
 IN_CI = os.environ.get("CI", "").lower() == "true"
 
 
-@functools.cache
-def _rig():
-    from facegen.synth.face import load_template
-    from facegen.synth.rig import Rig
-
-    mesh = load_template()
-    return mesh, Rig(mesh)
 
 
-def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 16000) -> Animation:
-    """A speech-like animation of the procedural face (random phones through the rig) with a sound of
-    noise bursts (loud where the jaw opens) lasting exactly frames / fps seconds."""
-    from facegen.synth import rig as rigs
-
-    mesh, rig = _rig()
-    rng = np.random.default_rng(seed)
-    seconds = frames / fps
-    phones, t = [], 0.1
-    names = sorted(rigs.PHONEME_VISEMES)
-    while t < seconds - 0.15:
-        if rng.random() < 0.08:
-            t += rng.uniform(0.15, 0.4)
-            continue
-        d = rng.uniform(0.05, 0.16)
-        phones.append((str(rng.choice(names)), t, min(t + d, seconds)))
-        t += d
-    lexicon = sorted(rigs.LEXICON)
-    words = [SimpleNamespace(text=str(rng.choice(lexicon)), start=float(s), end=float(s) + 0.3)
-             for s in np.sort(rng.uniform(0, max(seconds - 0.5, 0.1), max(1, int(seconds / 5))))]
-    curves = rigs.motion_curves(phones, words, frames, fps, rng=rng)
-    vertices = rig.pose(curves)
-    n = round(seconds * sample_rate)
-    envelope = np.interp(np.arange(n) / sample_rate, np.arange(frames) / fps, curves[:, 0] + 0.05)
-    audio = (0.5 * envelope * rng.standard_normal(n)).astype(np.float32)
-    return Animation(vertices=vertices, faces=mesh.faces, fps=fps, template=mesh.vertices, audio=audio,
-                     sample_rate=sample_rate, regions=dict(mesh.regions), metadata={"speaker": "test", "seed": seed})
 
 
 @pytest.fixture(scope="module")

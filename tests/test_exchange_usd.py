@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from helpers import FPS, SR, Boom, make_animation
 from pxr import Sdf, Usd, UsdGeom, UsdMedia
 
 from facegen import __version__
@@ -16,30 +17,6 @@ from facegen.errors import FacegenError
 from facegen.exchange import extensions, read_animation, write_animation
 from facegen.exchange.usd import DEFAULT_METERS_PER_UNIT
 from facegen.mesh import Mesh
-
-FPS = 25.0
-SR = 16000
-
-
-def make_animation(mesh: Mesh, frames: int = 50, fps: float = FPS, audio_frames: float | None = None) -> Animation:
-    """Sinusoidal per-vertex offsets (a different phase per vertex, no two frames equal) + a 220 Hz tone
-    lasting `audio_frames` frames (default: as long as the animation)."""
-    t = np.arange(frames, dtype=np.float64)[:, None, None] / fps
-    phase = np.linspace(0.0, 3.0, mesh.num_vertices)[None, :, None]
-    axis = np.array([0.3, 1.0, 0.5])[None, None, :]
-    offsets = 0.02 * mesh.size * np.sin(2 * np.pi * 1.3 * t + phase) * axis
-    n = round((frames if audio_frames is None else audio_frames) / fps * SR)
-    audio = (0.5 * np.sin(2 * np.pi * 220.0 * np.arange(n) / SR)).astype(np.float32)
-    return Animation(
-        vertices=(mesh.vertices[None] + offsets).astype(np.float32),
-        faces=mesh.faces,
-        fps=fps,
-        template=mesh.vertices,
-        audio=audio,
-        sample_rate=SR,
-        metadata={"model": "unit-test.safetensors", "speaker": "F2", "frames": np.int64(frames),
-                  "words": [{"word": "hi", "start": 0.1, "end": 0.3}], "tags": ["a", "b"], "gone": None},
-    )
 
 
 def stage_points(path: Path) -> tuple[Usd.Stage, UsdGeom.Mesh, list[float], np.ndarray]:
@@ -202,21 +179,13 @@ def test_bad_animations_are_refused(tmp_path, grid_mesh):
     assert list(tmp_path.iterdir()) == []
 
 
-class _Boom:
-    """A metadata key whose str() fails: makes the USD write fail half-way (after the sidecar WAV)."""
-
-    def __init__(self, exc: BaseException):
-        self.exc = exc
-
-    def __str__(self) -> str:
-        raise self.exc
 
 
 @pytest.mark.parametrize("exc", [RuntimeError("disk on fire"), KeyboardInterrupt()])
 @pytest.mark.parametrize("ext", [".usda", ".usdc"])
 def test_failed_write_leaves_nothing(tmp_path, grid_mesh, exc, ext):
     anim = make_animation(grid_mesh, frames=10)
-    anim.metadata = {_Boom(exc): 1}
+    anim.metadata = {Boom(exc): 1}
     with pytest.raises(type(exc)):
         write_animation(anim, tmp_path / f"out{ext}")
     assert list(tmp_path.iterdir()) == []  # neither the asset, nor the sidecar, nor temp files
@@ -227,7 +196,7 @@ def test_failed_write_keeps_previous_files(tmp_path, grid_mesh):
     write_animation(good, tmp_path / "out.usdc")
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     bad = make_animation(grid_mesh, frames=20)
-    bad.metadata = {_Boom(RuntimeError("no")): 1}
+    bad.metadata = {Boom(RuntimeError("no")): 1}
     with pytest.raises(RuntimeError):
         write_animation(bad, tmp_path / "out.usdc")
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before

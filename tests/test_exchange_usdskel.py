@@ -5,80 +5,34 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import (
+    FPS,
+    Boom,
+    make_animation,
+    max_distance,
+    rich_animation,
+    static_vertices,
+    usdskel_points,
+)
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdMedia, UsdSkel, Vt
-from test_exchange_usd import FPS, SR, _Boom, make_animation
 
 from facegen import __version__
-from facegen.animation import Animation
 from facegen.errors import FacegenError
 from facegen.exchange import read_animation, write_animation
 from facegen.exchange.pca import DEFAULT_TOLERANCE, MAX_FRAME_TARGETS
 from facegen.exchange.usd import DEFAULT_METERS_PER_UNIT
-from facegen.mesh import Mesh
 from facegen.validate import validate
 
 FRAMES = 60
 WEIGHTS = Sdf.Path("/Face/Skeleton/Animation.blendShapeWeights")
 
 
-def static_vertices(mesh: Mesh) -> np.ndarray:
-    """The indices of the vertices rich_animation never moves: the top 35% by height."""
-    return np.flatnonzero(mesh.vertices[:, 1] > np.quantile(mesh.vertices[:, 1], 0.65))
 
 
-def rich_animation(mesh: Mesh, frames: int = FRAMES, fps: float = FPS) -> Animation:
-    """Six smooth spatial fields driven by curves of different frequencies, plus a nonlinear "jaw"
-    rotation of the lower half (so PCA needs several targets); the top three grid rows never move (so
-    targets are sparse there); 220 Hz tone as long as the clip."""
-    v = mesh.vertices.astype(np.float64)
-    t = np.arange(frames)[:, None] / fps
-    rng = np.random.default_rng(7)
-    centres = v[rng.choice(len(v), 6, replace=False)]
-    fields = np.stack([
-        np.exp(-((v - c) ** 2).sum(1) / (2 * (0.15 * mesh.size) ** 2))[:, None] * rng.standard_normal(3)
-        for c in centres
-    ])  # [6, V, 3]
-    curves = np.sin(2 * np.pi * np.array([0.7, 1.3, 2.1, 2.9, 3.7, 4.3]) * t + rng.uniform(0, 6, 6))
-    offsets = 0.01 * mesh.size * np.einsum("tc,cvk->tvk", curves, fields)
-    angle = 0.2 * (0.5 + 0.5 * np.sin(2 * np.pi * 1.1 * t[:, 0]))  # [T]
-    low = v[:, 1] < np.median(v[:, 1])
-    y, z = v[low, 1] - v[:, 1].max(), v[low, 2]
-    offsets[:, low, 1] += y * (np.cos(angle)[:, None] - 1) - z * np.sin(angle)[:, None]
-    offsets[:, low, 2] += y * np.sin(angle)[:, None] + z * (np.cos(angle)[:, None] - 1)
-    offsets[:, static_vertices(mesh)] = 0.0
-    n = round(frames / fps * SR)
-    return Animation(
-        vertices=(v[None] + offsets).astype(np.float32),
-        faces=mesh.faces,
-        fps=fps,
-        template=mesh.vertices,
-        audio=(0.5 * np.sin(2 * np.pi * 220.0 * np.arange(n) / SR)).astype(np.float32),
-        sample_rate=SR,
-        metadata={"model": "unit-test.safetensors", "speaker": "F2"},
-    )
 
 
-def max_distance(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.sqrt(((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2).sum(-1)).max())
 
 
-def usdskel_points(stage: Usd.Stage, time: float) -> np.ndarray:
-    """Evaluate /Face/Mesh at `time` with UsdSkel alone (Cache, SkinningQuery, BlendShapeQuery)."""
-    mesh = stage.GetPrimAtPath("/Face/Mesh")
-    cache = UsdSkel.Cache()
-    assert cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
-    skinning = cache.GetSkinningQuery(mesh)
-    skeleton = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skeleton")))
-    assert skinning and skeleton and skinning.HasBlendShapes()
-    weights = skinning.GetBlendShapeMapper().Remap(skeleton.GetAnimQuery().ComputeBlendShapeWeights(time))
-    shapes = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(mesh))
-    sub_weights, shape_indices, sub_indices = shapes.ComputeSubShapeWeights(weights)
-    points = UsdGeom.Mesh(mesh).GetPointsAttr().Get(time)
-    assert shapes.ComputeDeformedPoints(sub_weights, shape_indices, sub_indices,
-                                        shapes.ComputeBlendShapePointIndices(),
-                                        shapes.ComputeSubShapePointOffsets(), points)
-    assert skinning.ComputeSkinnedPoints(skeleton.ComputeSkinningTransforms(time), points, time)
-    return np.asarray(points, dtype=np.float32)
 
 
 def test_blendshapes_layout(tmp_path, grid_mesh):
@@ -250,7 +204,7 @@ def test_options_are_checked(tmp_path, grid_mesh):
 @pytest.mark.parametrize("exc", [RuntimeError("disk on fire"), KeyboardInterrupt()])
 def test_failed_write_leaves_nothing(tmp_path, grid_mesh, exc):
     anim = rich_animation(grid_mesh, frames=10)
-    anim.metadata = {_Boom(exc): 1}
+    anim.metadata = {Boom(exc): 1}
     with pytest.raises(type(exc)):
         write_animation(anim, tmp_path / "out.usdc", mode="blendshapes")
     assert list(tmp_path.iterdir()) == []

@@ -9,9 +9,8 @@ import zipfile
 import numpy as np
 import pytest
 import soundfile as sf
+from helpers import FPS, SR, _Boom, make_animation, max_distance, rich_animation, usdskel_points
 from pxr import Ar, Sdf, Usd, UsdGeom, UsdMedia, UsdValidation
-from test_exchange_usd import FPS, SR, _Boom, make_animation
-from test_exchange_usdskel import max_distance, rich_animation, usdskel_points
 
 from facegen.errors import FacegenError
 from facegen.exchange import extensions, read_animation, write_animation

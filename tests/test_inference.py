@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 import torch
-from bundles import make_bundle
+from helpers import make_bundle
 
 from facegen.errors import FacegenError
 from facegen.inference import (
@@ -24,9 +24,9 @@ from facegen.inference import (
     frame_stream,
     predict_frames,
     read_manifest,
-    select_device,
 )
 from facegen.model import one_hot
+from facegen.runtime import select_device
 
 REPO = Path(__file__).resolve().parents[1]
 SENTENCES = ("What an excellent room you have, sir.", "Such expensive furnishings!",
@@ -133,7 +133,7 @@ MEMORY_SCRIPT = textwrap.dedent("""
         return int(re.search(r"VmHWM:\\s+(\\d+)", open("/proc/self/status").read()).group(1)) / 1024
 
     sys.path.insert(0, {tests!r})
-    from bundles import make_bundle
+    from helpers import make_bundle
     from facegen.inference import predict_frames
     from facegen.synth.face import make_face
     torch.set_num_threads(2)

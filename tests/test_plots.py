@@ -8,9 +8,7 @@ import struct
 
 import numpy as np
 import pytest
-from bundles import make_bundle
-from test_data import TOY_SPLITS, grid_face, make_dataset
-from test_train import _train
+from helpers import TOY_SPLITS, _train, grid_face, make_bundle, make_dataset
 
 from facegen.align import Word
 from facegen.bundle import load_bundle
@@ -110,7 +108,7 @@ def test_upper_face_activation_and_word_frames():
 # ----------------------------------------------------------------------------------------- end to end
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    from tiny_gpt2 import make_tiny_gpt2
+    from helpers import make_tiny_gpt2
 
     gpt2 = make_tiny_gpt2(tmp_path_factory.mktemp("gpt2"), n_positions=64)
     toy = make_dataset(tmp_path_factory.mktemp("toy"), subjects=("F2", "F3"))  # with word alignments

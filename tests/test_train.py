@@ -10,16 +10,14 @@ import math
 import numpy as np
 import pytest
 import torch
+from helpers import make_dataset, train_toy
 from safetensors import safe_open
-from test_data import TOY_SPLITS, make_dataset
 
 from facegen.bundle import load_bundle, read_metadata
 from facegen.data import Splits
 from facegen.errors import FacegenError
-from facegen.train import CHECKPOINT, default_checkpoint_dir, epoch_order, resolve_device, train
-
-SMALL = {"conv_channels": 16, "audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16,
-         "lstm_dim": 16}
+from facegen.runtime import select_device
+from facegen.train import CHECKPOINT, default_checkpoint_dir, epoch_order
 
 
 @pytest.fixture(scope="module")
@@ -27,11 +25,6 @@ def toy(tmp_path_factory):
     return make_dataset(tmp_path_factory.mktemp("toy"), with_alignments=False)
 
 
-def _train(toy, out, **kw):
-    options = {"modalities": "audio", "epochs": 2, "lr": 3e-3, "splits": TOY_SPLITS, "device": "cpu",
-               "model_options": SMALL, "quiet": True, "cache_dir": toy / ".cache", "threads": 1}
-    options.update(kw)
-    return train(toy, out, **options)
 
 
 def _weights(path):
@@ -42,7 +35,7 @@ def _weights(path):
 
 def test_training_lowers_the_loss_and_writes_bundle_checkpoint_and_curves(toy, tmp_path):
     out = tmp_path / "model.safetensors"
-    result = _train(toy, out, epochs=8)
+    result = train_toy(toy, out, epochs=8)
     losses = [h["train_loss"] for h in result.history]
     val = [h["val_loss"] for h in result.history]
     assert len(result.history) == 8 and result.epochs_run == 8
@@ -72,11 +65,11 @@ def test_training_lowers_the_loss_and_writes_bundle_checkpoint_and_curves(toy, t
 
 
 def test_resume_continues_and_equals_an_uninterrupted_run(toy, tmp_path):
-    first = _train(toy, tmp_path / "a.safetensors", epochs=2)
+    first = train_toy(toy, tmp_path / "a.safetensors", epochs=2)
     assert first.epochs_run == 2
-    resumed = _train(toy, tmp_path / "a.safetensors", epochs=3, resume=True)
+    resumed = train_toy(toy, tmp_path / "a.safetensors", epochs=3, resume=True)
     assert resumed.epochs_run == 1 and resumed.epochs == 3
-    straight = _train(toy, tmp_path / "b.safetensors", epochs=3)
+    straight = train_toy(toy, tmp_path / "b.safetensors", epochs=3)
     assert [h["train_loss"] for h in resumed.history] == [h["train_loss"] for h in straight.history]
     assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in straight.history]
     a, b = _weights(tmp_path / "a.safetensors"), _weights(tmp_path / "b.safetensors")
@@ -85,14 +78,14 @@ def test_resume_continues_and_equals_an_uninterrupted_run(toy, tmp_path):
     cb = _weights(tmp_path / "b.ckpt" / CHECKPOINT)
     assert all(torch.equal(ca[k], cb[k]) for k in ca if not k.startswith("rng"))
     # nothing left to do: resuming a finished run only rewrites the bundle
-    again = _train(toy, tmp_path / "a.safetensors", epochs=3, resume=True)
+    again = train_toy(toy, tmp_path / "a.safetensors", epochs=3, resume=True)
     assert again.epochs_run == 0 and again.best_epoch == straight.best_epoch
 
 
 def test_two_runs_with_the_same_seed_are_identical(toy, tmp_path):
-    _train(toy, tmp_path / "x.safetensors", epochs=1, seed=7)
-    _train(toy, tmp_path / "y.safetensors", epochs=1, seed=7)
-    _train(toy, tmp_path / "z.safetensors", epochs=1, seed=8)
+    train_toy(toy, tmp_path / "x.safetensors", epochs=1, seed=7)
+    train_toy(toy, tmp_path / "y.safetensors", epochs=1, seed=7)
+    train_toy(toy, tmp_path / "z.safetensors", epochs=1, seed=8)
     x, y, z = (_weights(tmp_path / f"{n}.safetensors") for n in "xyz")
     assert all(torch.equal(x[k], y[k]) for k in x)
     assert not torch.equal(x["model.fc_out.weight"], z["model.fc_out.weight"])
@@ -101,13 +94,13 @@ def test_two_runs_with_the_same_seed_are_identical(toy, tmp_path):
 
 
 def test_text_modalities_train_with_a_text_backend(tmp_path_factory, tmp_path):
-    from tiny_gpt2 import make_tiny_gpt2
+    from helpers import make_tiny_gpt2
 
     folder = make_tiny_gpt2(tmp_path_factory.mktemp("gpt2"), n_positions=64)
     toy = make_dataset(tmp_path / "d", subjects=("F2", "F3"), sentences=range(1, 6))
     for modalities, fusion in (("both", "tensor"), ("both", "concat"), ("text", "tensor")):
         out = tmp_path / f"{modalities}-{fusion}.safetensors"
-        result = _train(toy, out, epochs=1, modalities=modalities, fusion=fusion, text_backend=str(folder))
+        result = train_toy(toy, out, epochs=1, modalities=modalities, fusion=fusion, text_backend=str(folder))
         assert math.isfinite(result.best_loss)
         meta = read_metadata(out)
         assert meta["text_backend"] == {"id": str(folder), "dim": 32}
@@ -115,7 +108,7 @@ def test_text_modalities_train_with_a_text_backend(tmp_path_factory, tmp_path):
 
 
 def test_half_bundle_and_batches(toy, tmp_path):
-    result = _train(toy, tmp_path / "h.safetensors", epochs=1, half=True, batch_size=3)
+    result = train_toy(toy, tmp_path / "h.safetensors", epochs=1, half=True, batch_size=3)
     assert math.isfinite(result.best_loss)
     assert _weights(tmp_path / "h.safetensors")["model.fc_out.weight"].dtype == torch.float16
     assert load_bundle(tmp_path / "h.safetensors").model.fc_out.weight.dtype == torch.float32
@@ -123,33 +116,33 @@ def test_half_bundle_and_batches(toy, tmp_path):
 
 def test_a_nan_loss_stops_training_and_keeps_the_last_checkpoint(toy, tmp_path):
     out = tmp_path / "n.safetensors"
-    _train(toy, out, epochs=1)
+    train_toy(toy, out, epochs=1)
     with pytest.raises(FacegenError, match=r"loss became (nan|inf) at epoch 2 on F[23]_e0\d.*last good "
                                            r"checkpoint \(epoch 1\)"):
-        _train(toy, out, epochs=3, resume=True, lr=1e38)
+        train_toy(toy, out, epochs=3, resume=True, lr=1e38)
     with safe_open(str(tmp_path / "n.ckpt" / CHECKPOINT), framework="pt") as f:
         assert json.loads(f.metadata()["facegen_checkpoint"])["epoch"] == 1
 
 
 def test_bad_setups_are_refused(toy, tmp_path):
-    _train(toy, tmp_path / "s.safetensors", epochs=1)
+    train_toy(toy, tmp_path / "s.safetensors", epochs=1)
     with pytest.raises(FacegenError, match="different setup .*seed"):
-        _train(toy, tmp_path / "s.safetensors", epochs=2, seed=5, resume=True)
+        train_toy(toy, tmp_path / "s.safetensors", epochs=2, seed=5, resume=True)
     with pytest.raises(FacegenError, match="unknown modalities"):
-        _train(toy, tmp_path / "m.safetensors", modalities="video")
+        train_toy(toy, tmp_path / "m.safetensors", modalities="video")
     with pytest.raises(FacegenError, match="output folder .* does not exist"):
-        _train(toy, tmp_path / "no" / "m.safetensors")
+        train_toy(toy, tmp_path / "no" / "m.safetensors")
     with pytest.raises(FacegenError, match="no usable training sequence"):
-        _train(toy, tmp_path / "m.safetensors", splits=Splits(train_subjects=("M9",), test_subjects=()),
+        train_toy(toy, tmp_path / "m.safetensors", splits=Splits(train_subjects=("M9",), test_subjects=()),
                warn=None)
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
 def test_device_choice_without_cuda(toy, tmp_path):
     said: list[str] = []
-    assert resolve_device("auto", said.append) == torch.device("cpu") and "CPU" in said[0]
-    assert resolve_device("cpu", said.append) == torch.device("cpu")
+    assert select_device("auto", said.append, task="training") == torch.device("cpu") and "CPU" in said[0]
+    assert select_device("cpu", said.append, task="training") == torch.device("cpu")
     with pytest.raises(FacegenError, match="no CUDA GPU"):
-        _train(toy, tmp_path / "c.safetensors", device="cuda")
+        train_toy(toy, tmp_path / "c.safetensors", device="cuda")
     with pytest.raises(FacegenError, match="unknown device"):
-        resolve_device("tpu", said.append)
+        select_device("tpu", said.append, task="training")

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from helpers import FPS, SR, make_animation
 from pxr import Sdf, Vt
-from test_exchange_usd import FPS, SR, make_animation
 
 from facegen.exchange import write_animation
 from facegen.mesh import Mesh

@@ -39,10 +39,11 @@ import numpy as np
 from facegen import __version__
 from facegen.animation import Animation
 from facegen.atomic import atomic_path
+from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
 from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, morph_basis
-from facegen.exchange.wav import atomic_with_sidecar, read_wav, sidecar_path
+from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
 from facegen.mesh import Mesh, check_topology
 
 EXTENSIONS = (".glb", ".gltf")
@@ -474,7 +475,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     audio, sample_rate = None, 16000
     wav = sidecar_path(path)
     if wav.is_file():
-        audio, sample_rate = read_wav(wav)
+        audio, sample_rate = load_audio(wav)
     else:
         data = decoded["file"].mp3_audio()
         if data is not None:

@@ -13,7 +13,6 @@ start with silence; the WAV sidecar keeps them).
 from __future__ import annotations
 
 import functools
-import io
 import subprocess
 from math import gcd
 
@@ -57,13 +56,9 @@ def encode(audio: np.ndarray, sample_rate: int, *, compensate: bool = True) -> t
 
 def decode(data: bytes) -> tuple[np.ndarray, int]:
     """Decode MP3 bytes to mono float32 samples and their rate (libsndfile/mpg123)."""
-    import soundfile as sf
+    from facegen.audio import load_audio
 
-    try:
-        samples, rate = sf.read(io.BytesIO(data), dtype="float32", always_2d=True)
-    except (RuntimeError, TypeError) as exc:
-        raise FacegenError(f"cannot decode the embedded MP3 audio ({exc}): write the file again") from exc
-    return samples.mean(axis=1).astype(np.float32), int(rate)
+    return load_audio(data, what="the embedded MP3 audio")
 
 
 def lag(decoded: np.ndarray, original: np.ndarray) -> int:

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from facegen.animation import Animation
+from facegen.audio import load_audio
 from facegen.errors import FacegenError
-from facegen.exchange.wav import atomic_with_sidecar, read_wav, sidecar_path
+from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
 from facegen.mesh import Mesh
 
 EXTENSIONS = (".npy",)
@@ -79,7 +80,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     audio, sample_rate = None, 16000
     wav = sidecar_path(path)
     if wav.is_file():
-        audio, sample_rate = read_wav(wav)
+        audio, sample_rate = load_audio(wav)
     return Animation(
         vertices=data.reshape(len(data), num_vertices, 3).astype(np.float32),
         faces=np.asarray(template.faces, dtype=np.int32),

@@ -26,7 +26,6 @@ only; lists of one scalar type become typed arrays, other lists JSON strings)}.
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import re
@@ -36,9 +35,10 @@ import numpy as np
 
 from facegen import __version__
 from facegen.animation import Animation
+from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_skel
-from facegen.exchange.wav import atomic_with_sidecar, read_wav
+from facegen.exchange.wav import atomic_with_sidecar
 from facegen.mesh import Mesh, check_topology
 
 EXTENSIONS = (".usda", ".usdc", ".usd")
@@ -358,17 +358,11 @@ def read_audio_asset(resolved: str) -> tuple[np.ndarray, int]:
     from pxr import Ar
 
     if not Ar.IsPackageRelativePath(resolved):
-        return read_wav(resolved)
+        return load_audio(resolved)
     asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
     if asset is None:
         raise FacegenError(f"cannot open audio {resolved}: the package is incomplete, write it again")
-    import soundfile as sf
-
-    try:
-        data, rate = sf.read(io.BytesIO(bytes(asset.GetBuffer())), dtype="float32", always_2d=True)
-    except (OSError, RuntimeError) as exc:
-        raise FacegenError(f"cannot read audio {resolved} ({exc}): write the package again") from exc
-    return data.mean(axis=1).astype(np.float32), int(rate)
+    return load_audio(bytes(asset.GetBuffer()), what=f"audio {resolved}")
 
 
 def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None) -> Animation:

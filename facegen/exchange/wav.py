@@ -14,33 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from facegen.atomic import atomic_path
+from facegen.audio import write_wav
 from facegen.errors import FacegenError
 
 
 def sidecar_path(path: str | os.PathLike) -> Path:
     """The WAV file that goes with an animation file: same folder, same stem, `.wav`."""
     return Path(path).with_suffix(".wav")
-
-
-def write_wav(audio: np.ndarray, sample_rate: int, path: str | os.PathLike) -> None:
-    """Write mono float audio as 16-bit PCM WAV (samples clipped to [-1, 1])."""
-    import soundfile as sf
-
-    samples = np.clip(np.asarray(audio, dtype=np.float32).reshape(-1), -1.0, 1.0)
-    sf.write(str(path), samples, int(sample_rate), subtype="PCM_16", format="WAV")
-
-
-def read_wav(path: str | os.PathLike) -> tuple[np.ndarray, int]:
-    """Read an audio file as mono float32 samples (channels averaged) and its sample rate."""
-    import soundfile as sf
-
-    try:
-        data, sample_rate = sf.read(str(path), dtype="float32", always_2d=True)
-    except (OSError, RuntimeError) as exc:  # sf.LibsndfileError is a RuntimeError
-        raise FacegenError(
-            f"cannot read audio file {path} ({exc}): pass a readable WAV/FLAC/OGG file"
-        ) from exc
-    return data.mean(axis=1).astype(np.float32), int(sample_rate)
 
 
 def is_same_file(a: str | os.PathLike | None, b: str | os.PathLike) -> bool:

@@ -1,0 +1,61 @@
+"""Benchmark: the small stages whose speed tests used to assert (they are not timed tests any more).
+
+Targets (2 CPU cores): rig.pose of 125 frames (5 s) on the procedural face < 1 s; MiniLM word vectors of a
+720-word transcript < 20 s; per-frame text features of 10 minutes (1,500 words, 15,000 frames) < 3 s.
+
+    python benchmarks/bench_parts.py [--runs 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+
+def best_of(runs: int, fn) -> float:
+    times = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=3)
+    args = parser.parse_args(argv)
+
+    from facegen.synth.face import load_template
+    from facegen.synth.rig import Rig
+    from facegen.text import frame_features, load_text_backend
+
+    rig = Rig(load_template())
+    weights = np.random.default_rng(0).random((125, len(rig.channels))).astype(np.float32)
+    rig.pose(weights[:5])
+    rows = [("rig.pose, 125 frames", best_of(args.runs, lambda: rig.pose(weights)), 1.0)]
+
+    minilm = load_text_backend("minilm")
+    words = ("we walked along the quiet river at dawn while the city slept " * 60).split()
+    rows.append(("MiniLM, 720 words", best_of(args.runs, lambda: minilm.word_vectors(words)), 20.0))
+
+    rng = np.random.default_rng(1)
+    starts = np.sort(rng.uniform(0, 600, 1500))
+    from facegen.align import Word
+
+    spans = [Word("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, 1500), strict=True)]
+    vectors = rng.normal(size=(1500, 384)).astype(np.float32)
+    rows.append(("text frames, 10 min", best_of(args.runs, lambda: frame_features(spans, vectors, 15_000, 25.0)), 3.0))
+
+    failed = 0
+    for name, seconds, target in rows:
+        ok = seconds <= target
+        failed += not ok
+        print(f"{name:24s} {seconds:7.3f} s  (target <= {target:g} s) {'ok' if ok else 'SLOW'}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,131 @@
+"""What every stage shares at run time: the message callback type, the torch device, stage profiles.
+
+FACEGEN_PROFILE=1 prints each stage's seconds (and the process's peak memory) as JSON on stderr when the
+process exits; stages are timed with `with PROFILE.stage("name"):`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Callable
+
+from facegen.errors import FacegenError
+
+DEVICES = ("auto", "cpu", "cuda")
+
+Say = Callable[[str], None]  # where progress and notes go: print, a list's append, a progress bar
+
+
+def silent(_: str) -> None:
+    """A Say that says nothing."""
+
+
+# --------------------------------------------------------------------------------------------------
+# profiling: FACEGEN_PROFILE=1 prints each stage's seconds as JSON on stderr when the process exits
+
+
+class _Profile:
+    """Stage timings of this process, enabled by the FACEGEN_PROFILE environment variable."""
+
+    def __init__(self) -> None:
+        self.enabled = os.environ.get("FACEGEN_PROFILE", "") not in ("", "0")
+        self.stages: dict[str, float] = {}
+        self.marks: dict[str, float] = {}
+        self._registered = False
+
+    def mark(self, name: str) -> None:
+        """Record the wall-clock time (time.time()) of an event, e.g. "animate_start"."""
+        if self.enabled:
+            self.marks[name] = time.time()
+            self._register()
+
+    def add(self, name: str, seconds: float) -> None:
+        if self.enabled:
+            self.stages[name] = self.stages.get(name, 0.0) + seconds
+            self._register()
+
+    def stage(self, name: str):
+        return _Stage(self, name)
+
+    def _register(self) -> None:
+        if not self._registered:
+            import atexit
+
+            atexit.register(self.report)
+            self._registered = True
+
+    def report(self) -> None:
+        end = time.time()
+        stages = dict(self.stages)
+        if "animate_end" in self.marks:  # the CLI writes the asset after animate() returns
+            stages["writing"] = end - self.marks["animate_end"]
+        payload = {"facegen_profile": {k: round(v, 4) for k, v in stages.items()},
+                   "marks": self.marks, "exit": end,
+                   "heavy_modules": sorted(m for m in HEAVY_MODULES if m in sys.modules)}
+        peak = peak_rss_mb()
+        if peak is not None:
+            payload["max_rss_mb"] = round(peak, 1)
+        sys.stderr.write(json.dumps(payload) + "\n")
+        sys.stderr.flush()
+
+
+class _Stage:
+    def __init__(self, profile: _Profile, name: str) -> None:
+        self.profile, self.name = profile, name
+
+    def __enter__(self) -> None:
+        self.start = time.perf_counter()
+
+    def __exit__(self, *exc) -> None:
+        self.profile.add(self.name, time.perf_counter() - self.start)
+
+
+PROFILE = _Profile()
+HEAVY_MODULES = ("librosa", "numba", "transformers", "pxr", "scipy", "matplotlib", "trimesh")
+
+
+def peak_rss_mb() -> float | None:
+    """This process's peak resident memory in MB: VmHWM on Linux (its own, unlike ru_maxrss, which keeps
+    the parent's peak across fork + exec), else ru_maxrss; None where neither exists."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    try:
+        import resource
+    except ImportError:  # Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB elsewhere
+
+
+def select_device(device: str = "auto", say: Say = silent, task: str = "inference"):
+    """The torch device for `device`: "cpu", "cuda" (or "cuda:N") or "auto" (cuda when torch sees a GPU).
+
+    "auto" without a GPU runs on the CPU and says so through `say`; an explicit "cuda" without one is a
+    FacegenError (the CLI exits 2).
+    """
+    import torch
+
+    name = str(device).strip().lower()
+    if name not in DEVICES and not name.startswith("cuda:"):
+        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda")
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda")
+        say(f"no CUDA GPU available: running {task} on the CPU")
+        return torch.device("cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise FacegenError(f"--device {name} was asked for but torch sees no CUDA GPU: use --device cpu (or auto)")
+    return torch.device(name)
+
+
+def warn_stderr(message: str) -> None:
+    """The default Say for warnings: one line on stderr."""
+    print(f"facegen: warning: {message}", file=sys.stderr)
