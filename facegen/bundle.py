@@ -23,7 +23,7 @@ import torch
 
 from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh, topology_fingerprint
+from facegen.mesh import Mesh
 from facegen.model import FaceModel, ModelConfig
 
 FORMAT_VERSION = 1
@@ -204,8 +204,4 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
     return bundle
 
 
-def topology_of(meta: dict) -> tuple[int, str]:
-    return int(meta["topology"]["num_vertices"]), str(meta["topology"]["fingerprint"])
-
-
-__all__ = ["Bundle", "default_bundle_path", "load_bundle", "read_metadata", "save_bundle", "topology_fingerprint"]
+__all__ = ["Bundle", "default_bundle_path", "load_bundle", "read_metadata", "save_bundle"]

@@ -74,9 +74,9 @@ def cli(debug: bool) -> None:
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, usd_mode,
             morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
-    from facegen.animate import animate as run
     from facegen.atomic import check_writable
     from facegen.exchange import check_write_options, format_module, write_animation
+    from facegen.pipeline import animate as run
 
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
@@ -146,8 +146,8 @@ def render(input_file, output, compare, model, template, fps, size, views, error
 def align(audio, text, text_file, output):
     """Find when each word of the transcript is spoken in AUDIO."""
     from facegen import align as al
-    from facegen.animate import get_words
     from facegen.audio import check_speech, load_audio
+    from facegen.pipeline import get_words
 
     _one_of(text=text, text_file=text_file)
     if output and Path(output).suffix.lower() not in (".json", ".textgrid"):
@@ -236,7 +236,7 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
 def batch(manifest, output_dir, model, text_model, device, batch_size, ext, quiet):
     """Animate many clips listed in MANIFEST (CSV or JSON: audio, text|text_file|alignment, speaker, output),
     loading the model and the text model once. Exit 1 when any clip failed."""
-    from facegen.inference import read_manifest, run_batch
+    from facegen.batch import read_manifest, run_batch
 
     results = run_batch(read_manifest(manifest, outdir=output_dir, default_ext=ext), bundle=model, device=device,
                         text_model=text_model, batch_size=batch_size, say=_progress(quiet), warn=_progress(False))

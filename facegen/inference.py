@@ -1,5 +1,4 @@
-"""Inference: the network on a clip's features — device choice, bounded-memory forward, frame streams,
-batches of clips, and stage profiles (FACEGEN_PROFILE=1).
+"""Inference: the network over a clip's features in bounded memory — decoder states, then frame streams.
 
 Where the memory goes: per frame the network carries 128 mel bands, 384 text features, 8,385 fused
 features and 256 decoder states, but outputs 3V = 70,110 numbers. A 10-minute clip (15,000 frames) has
@@ -26,17 +25,9 @@ so a points .usdc of 10 minutes needs ~4.4 GB whatever the inference does).
 from __future__ import annotations
 
 import contextlib
-import json
-import os
-import time
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
+from collections.abc import Iterator, Sequence
 
 import numpy as np
-
-from facegen.errors import FacegenError
-from facegen.runtime import Say, select_device, silent
 
 BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
@@ -68,8 +59,6 @@ def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | 
     import torch
     from torch.nn.utils.rnn import pack_sequence, unpack_sequence
 
-    from facegen.model import one_hot
-
     device = torch.device("cpu") if device is None else torch.device(device)
     model = _model_on(bundle, device)
     cfg = model.cfg
@@ -85,17 +74,11 @@ def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | 
                 if text.shape != (T, cfg.text_dim):
                     raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
                 text_t = torch.from_numpy(np.ascontiguousarray(text, np.float32))[None].to(device)
-            spk = one_hot(speaker, cfg.num_speakers).to(device)
-            enc = model.encode(mel_t, text_t, spk)
-            x = torch.empty(T, cfg.decoder_dim, device=device)
-            for s in range(0, T, fusion_frames):
-                part = {k: v[:, s:s + fusion_frames] for k, v in enc.items()}
-                x[s:s + fusion_frames] = model.act(model.fc_in(model.fuse(part, spk)))[0]
-            inputs.append(x)
+            spk = model.speaker_one_hot(speaker).to(device)
+            inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames)[0])
         if len(inputs) == 1:
-            return [model.lstm(inputs[0][None])[0][0]]
-        packed, _ = model.lstm(pack_sequence(inputs, enforce_sorted=False))
-        return list(unpack_sequence(packed))
+            return [model.decoder_states(inputs[0][None])[0]]
+        return list(unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False))))
 
 
 @contextlib.contextmanager
@@ -218,18 +201,6 @@ class FrameStream:
             self.compute(s, min(s + self.block_frames, len(self)), out=out[s:s + self.block_frames])
         return out if dtype is None else out.astype(dtype, copy=False)
 
-    def materialize(self) -> np.ndarray:
-        return np.asarray(self)
-
-    def factors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(states [T, H], weight [3V, H], base [3V]) with frames.reshape(T, -1) == states @ weight.T + base.
-
-        Every frame lies in an H-dimensional (256) affine subspace, so a PCA of the frames (morph targets
-        for .glb / USD blendshapes) can be computed exactly from these in O((T + V) x H) memory."""
-        if self._torch:
-            return (self._states.cpu().numpy(), self._weight.cpu().numpy(), self._base.cpu().numpy())
-        return self._states, self._weight, self._base
-
     def __repr__(self) -> str:
         return f"FrameStream(shape={self.shape}, block_frames={self.block_frames})"
 
@@ -251,177 +222,3 @@ def predict_frames(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: in
     FrameStream: the decoder states are computed now, the output frames when they are read."""
     states = decoder_states(bundle, mel, text, speaker, device=device)
     return frame_stream(bundle, states, template, block_frames)
-
-
-def predict_offsets(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *,
-                    device=None) -> np.ndarray:
-    """Run the network: mel [T,n_mels], text [T,D] or None → offsets [T,V,3] float32 (all in memory)."""
-    return np.asarray(predict_frames(bundle, mel, text, speaker, device=device))
-
-
-# --------------------------------------------------------------------------------------------------
-# many clips
-
-
-@dataclass
-class Job:
-    """One clip to animate: the audio, where its words come from, the speaker, the output file."""
-
-    audio: Path
-    output: Path
-    text: str | None = None
-    alignment: Path | None = None
-    speaker: str | None = None
-    no_text: bool = False
-
-
-@dataclass
-class JobResult:
-    job: Job
-    files: list[Path] = field(default_factory=list)
-    error: str | None = None
-    frames: int = 0
-    seconds: float = 0.0
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
-
-MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output")
-
-
-def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = None,
-                  default_ext: str = ".usdc") -> list[Job]:
-    """Jobs from a CSV (header: audio, text | text_file | alignment, speaker, output) or a JSON manifest
-    (a list of objects with those keys, or {"jobs": [...]}).
-
-    Relative audio/text_file/alignment paths are relative to the manifest's folder; relative outputs to
-    `outdir` (default: the manifest's folder). A missing output is the audio's name with `default_ext`.
-    A row with neither text nor alignment has its words recognised (as `facegen animate` without --text).
-    """
-    import csv
-
-    from facegen.exchange import format_module
-
-    path = Path(path)
-    try:
-        raw = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FacegenError(f"cannot read manifest {path} ({exc}): pass a UTF-8 CSV or JSON file") from exc
-    if raw.lstrip().startswith(("[", "{")):
-        try:
-            data = json.loads(raw)
-        except json.JSONDecodeError as exc:
-            raise FacegenError(f"manifest {path} is not valid JSON ({exc}): fix it") from exc
-        rows = data.get("jobs") if isinstance(data, dict) else data
-        if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
-            raise FacegenError(f'manifest {path} must be a list of objects or {{"jobs": [...]}}')
-    else:
-        rows = list(csv.DictReader(raw.splitlines()))
-    base = path.parent
-    out_base = Path(outdir) if outdir is not None else base
-    jobs = []
-    for n, row in enumerate(rows, 1):
-        row = {str(k).strip().lower(): (str(v).strip() if v is not None else "") for k, v in row.items() if k}
-        unknown = sorted(set(row) - set(MANIFEST_COLUMNS))
-        if unknown:
-            raise FacegenError(f"manifest {path}: unknown column(s) {', '.join(unknown)}: use "
-                               f"{', '.join(MANIFEST_COLUMNS)}")
-        if not row.get("audio"):
-            raise FacegenError(f"manifest {path}, row {n}: no audio file given")
-        audio = base / row["audio"]
-        text = row.get("text") or None
-        if row.get("text_file"):
-            try:
-                text = (base / row["text_file"]).read_text(encoding="utf-8")
-            except (OSError, UnicodeDecodeError) as exc:
-                raise FacegenError(f"manifest {path}, row {n}: cannot read {row['text_file']} ({exc})") from exc
-        alignment = base / row["alignment"] if row.get("alignment") else None
-        if text and alignment:
-            raise FacegenError(f"manifest {path}, row {n}: give text or alignment, not both")
-        output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
-        try:
-            format_module(output)
-        except FacegenError as exc:
-            raise FacegenError(f"manifest {path}, row {n}: {exc}") from None
-        jobs.append(Job(audio=audio, output=out_base / output, text=text, alignment=alignment,
-                        speaker=row.get("speaker") or None))
-    if not jobs:
-        raise FacegenError(f"manifest {path} lists no clips")
-    return jobs
-
-
-def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-                 batch_size: int = 16, window: int = 64, say: Say = silent,
-                 warn: Say = silent) -> Iterator[tuple[Job, object]]:
-    """Animate many clips with the model and text backend loaded once: yields (job, Animation) or
-    (job, FacegenError) for every job, in the input order within windows of `window` jobs.
-
-    Within a window, clips are sorted by length and run through the decoder BiLSTMs `batch_size` at a
-    time (packed: each clip's result equals its own single run). The frames of each Animation are a
-    FrameStream (computed when the writer reads them).
-    """
-    from facegen.animate import finish_animation, prepare_clip
-    from facegen.bundle import Bundle, load_bundle
-
-    if not isinstance(bundle, Bundle):
-        bundle = load_bundle(bundle)
-    dev = select_device(device, warn)
-    pending: list[Job] = []
-
-    def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object]]:
-        prepared: dict[int, object] = {}
-        for i, job in enumerate(window_jobs):
-            try:
-                prepared[i] = prepare_clip(job.audio, bundle=bundle, text=job.text, alignment=job.alignment,
-                                           no_text=job.no_text, speaker=job.speaker, text_model=text_model,
-                                           warn=warn)
-            except FacegenError as exc:
-                prepared[i] = exc
-        ready = sorted((i for i, c in prepared.items() if not isinstance(c, FacegenError)),
-                       key=lambda i: prepared[i].num_frames)
-        for b in range(0, len(ready), batch_size):
-            ids = ready[b:b + batch_size]
-            clips = [prepared[i] for i in ids]
-            states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker) for c in clips],
-                                          device=dev)
-            for i, clip, st in zip(ids, clips, states, strict=True):
-                prepared[i] = finish_animation(bundle, clip, frame_stream(bundle, st, clip.mesh.vertices))
-        for i, job in enumerate(window_jobs):
-            yield job, prepared[i]
-
-    for job in jobs:
-        pending.append(job)
-        if len(pending) >= window:
-            yield from run(pending)
-            pending = []
-    if pending:
-        yield from run(pending)
-
-
-def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-              batch_size: int = 16, say: Say = silent, warn: Say = silent) -> list[JobResult]:
-    """Animate every job and write its output (format from the extension); a clip that fails is
-    reported in its JobResult and the others go on. Returns one JobResult per job, in order."""
-    from facegen.exchange import write_animation
-
-    results = []
-    start = time.perf_counter()
-    for n, (job, anim) in enumerate(animate_many(jobs, bundle=bundle, device=device, text_model=text_model,
-                                                 batch_size=batch_size, warn=warn), 1):
-        t0 = time.perf_counter()
-        if isinstance(anim, FacegenError):
-            results.append(JobResult(job, error=str(anim)))
-        else:
-            try:
-                job.output.parent.mkdir(parents=True, exist_ok=True)
-                files = write_animation(anim, job.output, audio_source=job.audio)
-                results.append(JobResult(job, files=files, frames=anim.num_frames,
-                                         seconds=time.perf_counter() - t0))
-            except FacegenError as exc:
-                results.append(JobResult(job, error=str(exc)))
-        r = results[-1]
-        say(f"[{n}/{len(jobs)}] {job.output}: " + (f"{r.frames} frames" if r.ok else f"error: {r.error}")
-            + f" ({time.perf_counter() - start:.1f} s)")
-    return results

@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 
 import torch
 from torch import nn
+from torch.nn.utils.rnn import PackedSequence
 
 MODALITIES = ("both", "audio", "text")
 FUSIONS = ("tensor", "concat")
@@ -170,21 +171,36 @@ class FaceModel(nn.Module):
             return tensor_fusion(enc["audio"], enc["text"])
         return torch.cat([enc["audio"], enc["text"]], dim=-1)
 
-    def decode_hidden(self, fused: torch.Tensor) -> torch.Tensor:
-        """Fused features [B,T,F] → BiLSTM states [B,T,2*lstm_dim]."""
-        h, _ = self.lstm(self.act(self.fc_in(fused)))
-        return h
+    def speaker_one_hot(self, index: int, batch: int = 1) -> torch.Tensor:
+        """The speaker input: a [batch, num_speakers] one-hot of speaker `index`."""
+        return one_hot(index, self.cfg.num_speakers, batch)
+
+    def decoder_input(self, mel: torch.Tensor | None, text: torch.Tensor | None, speaker: torch.Tensor,
+                      block_frames: int | None = None) -> torch.Tensor:
+        """Encoders, fusion and the decoder's first FC: [B,T,decoder_dim]. With `block_frames`, the wide
+        per-frame part (tensor fusion + FC) runs that many frames at a time (bounded memory, same values)."""
+        enc = self.encode(mel, text, speaker)
+        if block_frames is None:
+            return self.act(self.fc_in(self.fuse(enc, speaker)))
+        T = next(iter(enc.values())).shape[1]
+        return torch.cat([self.act(self.fc_in(self.fuse({k: v[:, s:s + block_frames] for k, v in enc.items()},
+                                                            speaker)))
+                          for s in range(0, T, block_frames)], dim=1)
+
+    def decoder_states(self, x: torch.Tensor | PackedSequence) -> torch.Tensor | PackedSequence:
+        """The decoder BiLSTM over decoder inputs [B,T,decoder_dim] (or a packed batch of clips of different
+        lengths): states [B,T,2*lstm_dim], the only per-frame input of the output layer."""
+        return self.lstm(x)[0]
 
     def forward(self, mel: torch.Tensor | None, text: torch.Tensor | None,
                 speaker: torch.Tensor) -> torch.Tensor:
         """mel [B,T,n_mels], text [B,T,text_dim], speaker one-hot [B,S] → offsets [B,T,V,3]."""
-        enc = self.encode(mel, text, speaker)
-        h = self.decode_hidden(self.fuse(enc, speaker))
-        out = self.fc_out(h)
+        out = self.fc_out(self.decoder_states(self.decoder_input(mel, text, speaker)))
         return out.view(out.shape[0], out.shape[1], self.cfg.num_vertices, 3)
 
 
 def one_hot(index: int, num_speakers: int, batch: int = 1) -> torch.Tensor:
+    """A [batch, num_speakers] one-hot of speaker `index` (the model's speaker input)."""
     v = torch.zeros(batch, num_speakers)
     v[:, index] = 1.0
     return v

@@ -15,16 +15,9 @@ import soundfile as sf
 import torch
 from helpers import make_bundle
 
+from facegen.batch import Job, animate_many, read_manifest
 from facegen.errors import FacegenError
-from facegen.inference import (
-    FrameStream,
-    Job,
-    animate_many,
-    decoder_states,
-    frame_stream,
-    predict_frames,
-    read_manifest,
-)
+from facegen.inference import FrameStream, decoder_states, frame_stream, predict_frames
 from facegen.model import one_hot
 from facegen.runtime import select_device
 
@@ -111,16 +104,22 @@ def test_frame_stream_indexing(bundle, face):
     full = np.asarray(frames)
     assert isinstance(frames, FrameStream) and frames.shape == full.shape == (300, face.num_vertices, 3)
     assert len(frames) == 300 and frames.nbytes == full.nbytes
+    # BLAS may round a block computed into a slice of a larger array differently in the last bit (SIMD
+    # alignment): frames are compared to 1e-6 of the face's size, far below any visible difference
+    def same(a, b):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * face.size)
+        return True
+
     computed = frames.blocks_computed
     for i in range(64, 128):  # frames read in order: one block computed, then reused
-        assert np.array_equal(frames[i], full[i])
+        assert same(frames[i], full[i])
     assert frames.blocks_computed == computed + 1
-    assert np.array_equal(frames[-1], full[-1])
-    assert np.array_equal(frames[10:200:3], full[10:200:3])
-    assert np.array_equal(frames[5, 7], full[5, 7])
+    assert same(frames[-1], full[-1])
+    assert same(frames[10:200:3], full[10:200:3])
+    assert same(frames[5, 7], full[5, 7])
     blocks = list(frames.blocks(100))
     assert [s for s, _ in blocks] == [0, 100, 200] and all(len(b) == 100 for _, b in blocks)
-    assert np.array_equal(np.concatenate([b for _, b in blocks]), full)
+    assert same(np.concatenate([b for _, b in blocks]), full)
     with pytest.raises(IndexError):
         frames[300]
 
@@ -224,7 +223,7 @@ def test_device_cuda_without_gpu_is_a_user_error(clips, tmp_path):
 
 
 def test_batch_equals_individual(bundle, clips):
-    from facegen.animate import animate
+    from facegen.pipeline import animate
 
     _, items = clips
     jobs = [Job(audio=wav, output=wav.with_suffix(".npy"), alignment=words, speaker=str(i % 3))
@@ -245,7 +244,7 @@ def test_batch_equals_individual(bundle, clips):
 
 
 def test_run_batch_writes_every_output_and_reports_failures(bundle, clips, tmp_path):
-    from facegen.inference import run_batch
+    from facegen.batch import run_batch
 
     _, items = clips
     jobs = [Job(audio=wav, output=tmp_path / "out" / f"{wav.stem}.npy", alignment=words)

@@ -1,9 +1,11 @@
-"""The library entry point: speech (audio + words) → face animation."""
+"""The library entry point: speech (audio + words) → face animation — the one pipeline every command runs.
+
+(Named pipeline, not animate, so that `facegen.animate` stays the function of the package API.)
+"""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,14 +17,9 @@ from facegen.bundle import Bundle, load_bundle
 from facegen.errors import FacegenError
 from facegen.inference import FrameStream, predict_frames
 from facegen.mesh import Mesh, check_topology, read_mesh
-from facegen.runtime import PROFILE, select_device
+from facegen.runtime import PROFILE, Say, select_device, silent
 
-Progress = Callable[[str], None]
 LONG_INPUT_SECONDS = 20.0  # stage-by-stage progress is reported for clips at least this long
-
-
-def _quiet(_: str) -> None:
-    pass
 
 
 def get_words(
@@ -31,8 +28,8 @@ def get_words(
     *,
     text: str | None = None,
     alignment: str | os.PathLike | None = None,
-    progress: Progress = _quiet,
-    warn: Progress = _quiet,
+    progress: Say = silent,
+    warn: Say = silent,
 ) -> tuple[list, str]:
     """Word timings for the clip and where they came from (alignment file, forced alignment, recognition)."""
     from facegen import align
@@ -88,8 +85,8 @@ def prepare_clip(
     speaker: str | int | None = None,
     template: str | os.PathLike | Mesh | None = None,
     text_model: str | None = None,
-    progress: Progress = _quiet,
-    warn: Progress = _quiet,
+    progress: Say = silent,
+    warn: Say = silent,
 ) -> Clip:
     """Everything before the network: audio, word timings, text and audio features (see `animate`)."""
     spk = bundle.speaker_index(speaker)
@@ -100,7 +97,7 @@ def prepare_clip(
     check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
     T = num_frames(len(samples) / sr, cfg.fps)
     if len(samples) / sr < LONG_INPUT_SECONDS:
-        progress = _quiet
+        progress = silent
 
     words: list = []
     source = "none (--no-text)"
@@ -160,8 +157,8 @@ def animate(
     text_model: str | None = None,
     device: str = "auto",
     stream: bool = False,
-    progress: Progress = _quiet,
-    warn: Progress = _quiet,
+    progress: Say = silent,
+    warn: Say = silent,
 ) -> Animation:
     """Animate the face for one speech clip.
 
