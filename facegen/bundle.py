@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -118,6 +118,8 @@ def save_bundle(bundle: Bundle, path: str | os.PathLike, precision: str = "fp32"
 
     if precision not in PRECISIONS:
         raise FacegenError(f"unknown precision {precision!r}: use one of {', '.join(PRECISIONS)}")
+    if bundle.model.cfg.output_basis:  # stored as the paper's plain FC 3V (facegen.model: folded)
+        bundle = replace(bundle, model=bundle.model.folded())
     tensors: dict[str, torch.Tensor] = {}
     for k, v in bundle.model.state_dict().items():
         tensors.update(_compress(f"model.{k}", v.detach().cpu().contiguous(), precision))

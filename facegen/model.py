@@ -20,6 +20,16 @@ Choices where the paper is silent or ambiguous (stated once, here):
   model (the paper does not say); text features are used as given.
 - Text-only ablation: the speaker one-hot is concatenated to Hl (there is no audio encoder to carry it).
 - The last FC starts at zero, so an untrained model outputs the template (as FaceFormer does).
+
+Extensions (off by default, so the default configuration is the paper's network):
+- `output_basis` = K > 0: the last FC 3V is trained in a K-dimensional PCA basis B [3V, K] (orthonormal
+  columns) of the training motion with mean m: offsets = B (W h + b) + m. That is exactly the paper's FC 3V
+  restricted to rank K; `folded()` turns it into the plain FC 3V (weight B W, bias B b + m) that bundles
+  store, so inference never sees the difference. Training can then compare coefficients (B'(y - m)) instead
+  of 3V numbers per frame: the same loss up to a constant when B is orthonormal, ~8x cheaper per step.
+- `n_phones` = P > 0: a per-frame phone one-hot (P classes, from forced alignment) joins the audio encoder's
+  input: a 1x1 convolution of it is added to the standardised mel bands (the same as appending it to the
+  bands with the mel part of the first layer fixed to identity, so the mel path stays the paper's).
 """
 
 from __future__ import annotations
@@ -52,6 +62,8 @@ class ModelConfig:
     lstm_dim: int = 128
     lstm_layers: int = 2
     leaky_slope: float = 0.2
+    output_basis: int = 0  # K > 0: the output FC is trained in a K-dim PCA basis (see the module docstring)
+    n_phones: int = 0  # P > 0: a per-frame phone one-hot joins the mel bands at the audio encoder's input
 
     def __post_init__(self) -> None:
         if self.modalities not in MODALITIES:
@@ -91,12 +103,18 @@ class AudioEncoder(nn.Module):
                       padding=d * (cfg.kernel_size - 1) // 2)
             for d in cfg.dilations
         )
+        self.phones = nn.Conv1d(cfg.n_phones, cfg.conv_channels, 1, bias=False) if cfg.n_phones else None
         self.act = nn.LeakyReLU(cfg.leaky_slope)
         self.fc = nn.Linear(cfg.conv_channels + cfg.num_speakers, cfg.audio_dim)
 
-    def forward(self, mel: torch.Tensor, speaker: torch.Tensor) -> torch.Tensor:
-        """mel [B,T,n_mels] (standardised), speaker one-hot [B,S] → Ha [B,T,audio_dim]."""
+    def forward(self, mel: torch.Tensor, speaker: torch.Tensor, phones: torch.Tensor | None = None) -> torch.Tensor:
+        """mel [B,T,n_mels] (standardised), speaker one-hot [B,S], phones [B,T,P] one-hot (when the
+        model uses them) → Ha [B,T,audio_dim]."""
         h = self.inp(mel.transpose(1, 2))
+        if self.phones is not None:
+            if phones is None:
+                raise ValueError("this model needs per-frame phones")
+            h = h + self.phones(phones.transpose(1, 2))
         for conv in self.convs:
             h = h + self.act(conv(h))
         h = h.transpose(1, 2)
@@ -147,16 +165,20 @@ class FaceModel(nn.Module):
         self.act = nn.LeakyReLU(cfg.leaky_slope)
         self.lstm = nn.LSTM(cfg.decoder_dim, cfg.lstm_dim, num_layers=cfg.lstm_layers,
                             batch_first=True, bidirectional=True)
-        self.fc_out = nn.Linear(2 * cfg.lstm_dim, 3 * cfg.num_vertices)
+        K = cfg.output_basis
+        self.fc_out = nn.Linear(2 * cfg.lstm_dim, K or 3 * cfg.num_vertices)
         nn.init.zeros_(self.fc_out.weight)
         nn.init.zeros_(self.fc_out.bias)
+        if K:
+            self.register_buffer("basis", torch.zeros(3 * cfg.num_vertices, K))
+            self.register_buffer("basis_mean", torch.zeros(3 * cfg.num_vertices))
 
     def encode(self, mel: torch.Tensor | None, text: torch.Tensor | None,
-               speaker: torch.Tensor) -> dict[str, torch.Tensor]:
+               speaker: torch.Tensor, phones: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """The encoders' outputs (used by forward and by the correlation analysis)."""
         out: dict[str, torch.Tensor] = {}
         if self.audio is not None:
-            out["audio"] = self.audio((mel - self.mel_mean) / self.mel_std, speaker)
+            out["audio"] = self.audio((mel - self.mel_mean) / self.mel_std, speaker, phones)
         if self.text is not None:
             out["text"] = self.text(text)
         return out
@@ -176,10 +198,10 @@ class FaceModel(nn.Module):
         return one_hot(index, self.cfg.num_speakers, batch)
 
     def decoder_input(self, mel: torch.Tensor | None, text: torch.Tensor | None, speaker: torch.Tensor,
-                      block_frames: int | None = None) -> torch.Tensor:
+                      block_frames: int | None = None, phones: torch.Tensor | None = None) -> torch.Tensor:
         """Encoders, fusion and the decoder's first FC: [B,T,decoder_dim]. With `block_frames`, the wide
         per-frame part (tensor fusion + FC) runs that many frames at a time (bounded memory, same values)."""
-        enc = self.encode(mel, text, speaker)
+        enc = self.encode(mel, text, speaker, phones)
         if block_frames is None:
             return self.act(self.fc_in(self.fuse(enc, speaker)))
         T = next(iter(enc.values())).shape[1]
@@ -193,10 +215,38 @@ class FaceModel(nn.Module):
         return self.lstm(x)[0]
 
     def forward(self, mel: torch.Tensor | None, text: torch.Tensor | None,
-                speaker: torch.Tensor) -> torch.Tensor:
-        """mel [B,T,n_mels], text [B,T,text_dim], speaker one-hot [B,S] → offsets [B,T,V,3]."""
-        out = self.fc_out(self.decoder_states(self.decoder_input(mel, text, speaker)))
+                speaker: torch.Tensor, phones: torch.Tensor | None = None) -> torch.Tensor:
+        """mel [B,T,n_mels], text [B,T,text_dim], speaker one-hot [B,S] (phones [B,T,P]) → offsets [B,T,V,3]."""
+        out = self.fc_out(self.decoder_states(self.decoder_input(mel, text, speaker, phones=phones)))
+        if self.cfg.output_basis:
+            out = out @ self.basis.T + self.basis_mean
         return out.view(out.shape[0], out.shape[1], self.cfg.num_vertices, 3)
+
+    def coefficients(self, mel: torch.Tensor | None, text: torch.Tensor | None,
+                     speaker: torch.Tensor, phones: torch.Tensor | None = None) -> torch.Tensor:
+        """The output in the PCA basis, [B,T,K] (models with `output_basis` only): offsets = basis @ c + mean."""
+        if not self.cfg.output_basis:
+            raise ValueError("coefficients() needs a model with output_basis > 0")
+        return self.fc_out(self.decoder_states(self.decoder_input(mel, text, speaker, phones=phones)))
+
+    def set_basis(self, basis: torch.Tensor, mean: torch.Tensor) -> None:
+        """Set the PCA basis [3V, K] (orthonormal columns) and mean [3V] of the output offsets."""
+        with torch.no_grad():
+            self.basis.copy_(basis)
+            self.basis_mean.copy_(mean)
+
+    def folded(self) -> FaceModel:
+        """The same network with the plain FC 3V output layer (weight B W, bias B b + m): what bundles store."""
+        if not self.cfg.output_basis:
+            return self
+        cfg = ModelConfig.from_dict({**self.cfg.to_dict(), "output_basis": 0})
+        full = FaceModel(cfg)
+        state = {k: v for k, v in self.state_dict().items() if not k.startswith(("fc_out.", "basis"))}
+        with torch.no_grad():
+            state["fc_out.weight"] = self.basis @ self.fc_out.weight
+            state["fc_out.bias"] = self.basis @ self.fc_out.bias + self.basis_mean
+        full.load_state_dict(state)
+        return full.to(self.basis.device).train(self.training)
 
 
 def one_hot(index: int, num_speakers: int, batch: int = 1) -> torch.Tensor:

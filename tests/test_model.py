@@ -52,3 +52,24 @@ def test_speaker_changes_output_and_conv_keeps_length():
 def test_bad_config_refused():
     with pytest.raises(ValueError):
         ModelConfig(num_vertices=1, num_speakers=1, modalities="video")
+
+
+def test_pca_output_folds_into_the_papers_layer_and_phones_join_the_audio():
+    cfg = ModelConfig(num_vertices=50, num_speakers=2, text_dim=8, output_basis=4, n_phones=5, audio_dim=16,
+                      text_hidden=16, text_dim_out=8, decoder_dim=16, lstm_dim=16)
+    m = FaceModel(cfg).eval()
+    torch.manual_seed(0)
+    q, _ = torch.linalg.qr(torch.randn(150, 4))
+    m.set_basis(q, torch.randn(150))
+    torch.nn.init.normal_(m.fc_out.weight)
+    mel, text, spk = torch.randn(1, 20, 128), torch.randn(1, 20, 8), m.speaker_one_hot(1)
+    phones = torch.nn.functional.one_hot(torch.randint(0, 5, (1, 20)), 5).float()
+    out = m(mel, text, spk, phones)
+    coef = m.coefficients(mel, text, spk, phones)
+    assert coef.shape == (1, 20, 4) and m.fc_out.out_features == 4
+    torch.testing.assert_close(out.reshape(1, 20, -1), coef @ q.T + m.basis_mean, atol=1e-5, rtol=0)
+    full = m.folded()
+    assert full.cfg.output_basis == 0 and full.fc_out.out_features == 150
+    torch.testing.assert_close(full(mel, text, spk, phones), out, atol=1e-5, rtol=0)
+    other = phones.roll(3, dims=1)
+    assert (m(mel, text, spk, other) - out).abs().max() > 1e-4  # the phones change the output
