@@ -376,9 +376,23 @@ PHONEME_VISEMES: dict[str, tuple[str, ...]] = {
 }
 _STRESS = str.maketrans("", "", "'\",%=!")
 
+# CMU/ARPAbet phones (pocketsphinx, Festival and Flite after mapping; stress digits dropped) -> visemes
+CMU_VISEMES: dict[str, tuple[str, ...]] = {
+    **{p: ("PBM",) for p in ("P", "B", "M")}, **{p: ("FV",) for p in ("F", "V")},
+    **{p: ("TH",) for p in ("TH", "DH")}, **{p: ("SZ",) for p in ("S", "Z")},
+    **{p: ("SH",) for p in ("SH", "ZH", "CH", "JH")}, **{p: ("TDN",) for p in ("T", "D", "N", "DX")},
+    "L": ("L",), "R": ("R",), **{p: ("KG",) for p in ("K", "G", "NG")}, "HH": ("H",), "W": ("W",),
+    "Y": ("Y",), **{p: (p,) for p in ("AA", "AE", "AH", "ER", "EH", "IY", "IH", "AO", "OW", "UH", "UW")},
+    "AW": ("AA", "UH"), "AY": ("AA", "IH"), "EY": ("EH", "IH"), "OY": ("AO", "IH"),
+}
+ALPHABETS = ("espeak", "cmu")
 
-def phone_visemes(mnemonic: str) -> tuple[str, ...]:
-    """The viseme sequence of one espeak phoneme mnemonic; unknown phonemes are neutral ("rest")."""
+
+def phone_visemes(mnemonic: str, alphabet: str = "espeak") -> tuple[str, ...]:
+    """The viseme sequence of one phone: an espeak phoneme mnemonic, or a CMU phone (`alphabet="cmu"`,
+    stress digits allowed: "AH1"); silence and unknown phones are neutral ("rest")."""
+    if alphabet == "cmu":
+        return CMU_VISEMES.get(mnemonic.strip().upper().rstrip("012"), ("rest",))
     name = mnemonic.translate(_STRESS).strip()
     if name.startswith("_") or not name:
         return ("rest",)
@@ -386,6 +400,33 @@ def phone_visemes(mnemonic: str) -> tuple[str, ...]:
         if key in PHONEME_VISEMES:
             return PHONEME_VISEMES[key]
     return ("rest",)
+
+
+def phone_stress(mnemonic: str, alphabet: str = "espeak") -> float | None:
+    """1.0 for a phone marked with primary stress, 0.5 secondary, 0.0 unstressed, None when unmarked
+    (espeak: a leading ' or , ; CMU: the digit 1, 2 or 0)."""
+    name = mnemonic.strip()
+    if alphabet == "cmu":
+        return {"1": 1.0, "2": 0.5, "0": 0.0}.get(name[-1:]) if name else None
+    if name.startswith("'"):
+        return 1.0
+    return 0.5 if name.startswith(",") else None
+
+
+PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
+PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range
+STRESS_GAIN = 0.12  # stressed vowels open this much more, unstressed this much less
+
+
+def loudness_envelope(audio: np.ndarray, sample_rate: int, rate: float = 100.0) -> np.ndarray:
+    """The clip's loudness in dB (RMS over 30 ms windows), sampled at `rate` Hz: what `viseme_curves`
+    reads the prosody from."""
+    audio = np.asarray(audio, np.float64)
+    hop, win = max(1, round(sample_rate / rate)), max(1, int(0.03 * sample_rate))
+    energy = np.concatenate([[0.0], np.cumsum(np.pad(audio, (win // 2, win)) ** 2)])
+    power = (energy[win:] - energy[:-win])[::hop] / win
+    n = int(np.ceil(len(audio) / hop))
+    return (10 * np.log10(np.maximum(power[:n], 1e-10))).astype(np.float32)
 
 
 def _phone_fields(phone) -> tuple[str, float, float]:
@@ -410,38 +451,65 @@ def _frame_average(values: np.ndarray, num_frames: int, fps: float) -> np.ndarra
 
 
 def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
-                  style: SpeakerStyle | None = None) -> np.ndarray:
-    """Lips and jaw [num_frames, len(LOWER_CHANNELS)] from phone timings (espeak mnemonics, seconds).
+                  style: SpeakerStyle | None = None, *, alphabet: str = "espeak",
+                  loudness: np.ndarray | None = None, loudness_rate: float = 100.0) -> np.ndarray:
+    """Lips and jaw [num_frames, len(LOWER_CHANNELS)] from phone timings (seconds; espeak mnemonics, or
+    CMU phones with `alphabet="cmu"`).
 
     Coarticulation: Cohen-Massaro dominance functions (each segment's target is blended with its
     neighbours', weighted by dominances that fall off exponentially in time, with more anticipation
     than carry-over). Silence is the rest pose. During p, b and m the lips are closed (lip_close = 1)
     and the jaw nearly shut; a bilabial shorter than a frame still closes the lips on its nearest frame.
+
+    Prosody (as JALI's jaw and lip parameters): with `loudness` (dB sampled at `loudness_rate` Hz, see
+    `loudness_envelope`) every vowel opens the jaw and shapes the lips more when it is louder than the
+    clip's median vowel and less when quieter (PROSODY_DB, PROSODY_GAIN); stress marks on the phones add
+    STRESS_GAIN. Without either, the curves are those of the phones alone.
     """
+    if alphabet not in ALPHABETS:
+        raise FacegenError(f"unknown phone alphabet {alphabet!r}: use one of {', '.join(ALPHABETS)}")
     style = style or SpeakerStyle()
     if num_frames <= 0:
         return np.zeros((0, len(LOWER_CHANNELS)), np.float32)
     duration = num_frames / fps
     n = int(np.ceil(duration * _RATE)) + 1
     t = np.arange(n) / _RATE
-    segments: list[tuple[float, float, str]] = []
+    segments: list[tuple[float, float, str, float]] = []  # start, end, viseme, gain
     cursor = 0.0
     bilabial: list[tuple[float, float]] = []
+    vowel_db: list[float] = []
     for ph in phones:
         text, start, end = _phone_fields(ph)
         if end <= start:
             continue
         if start - cursor > 0.02:
-            segments.append((cursor, start, "rest"))
-        parts = phone_visemes(text)
+            segments.append((cursor, start, "rest", 1.0))
+        parts = phone_visemes(text, alphabet)
+        stress = phone_stress(text, alphabet) if parts[0] in VOWELS else None
+        gain = 1.0 if stress is None else 1.0 + STRESS_GAIN * (2 * stress - 1)
         step = (end - start) / len(parts)
         for k, vis in enumerate(parts):
-            segments.append((start + k * step, start + (k + 1) * step, vis))
+            segments.append((start + k * step, start + (k + 1) * step, vis, gain))
         if parts == ("PBM",):
             bilabial.append((start, end))
         cursor = max(cursor, end)
     if duration - cursor > 0.0:
-        segments.append((cursor, max(duration, cursor + 0.1), "rest"))
+        segments.append((cursor, max(duration, cursor + 0.1), "rest", 1.0))
+    if loudness is not None and len(loudness):
+        loud = np.asarray(loudness, np.float64)
+
+        def level(start: float, end: float) -> float:
+            a = int(np.clip(start * loudness_rate, 0, len(loud) - 1))
+            return float(loud[a:max(a + 1, int(np.ceil(end * loudness_rate)))].mean())
+
+        levels = [level(a, b) if vis in VOWELS else np.nan for a, b, vis, _ in segments]
+        vowel_db = [v for v in levels if np.isfinite(v)]
+        if vowel_db:
+            median = float(np.median(vowel_db))
+            segments = [(a, b, vis, g * float(np.clip(1 + PROSODY_GAIN * (lv - median) / PROSODY_DB,
+                                                        1 - PROSODY_GAIN, 1 + PROSODY_GAIN)))
+                        if np.isfinite(lv) else (a, b, vis, g)
+                        for (a, b, vis, g), lv in zip(segments, levels, strict=True)]
 
     C = len(LOWER_CHANNELS)
     lips = np.array([c != "jaw_open" for c in LOWER_CHANNELS])
@@ -449,8 +517,10 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     num = np.zeros((n, C))
     den = np.full((n, C), 1e-9)
     ahead, behind = 0.07 * style.coarticulation, 0.045 * style.coarticulation
-    for start, end, vis in segments:
+    for start, end, vis, gain in segments:
         target, dom_jaw, dom_lips = VISEMES[vis]
+        if gain != 1.0:
+            target = np.where(is_close, target, np.clip(target * gain, 0.0, 1.0))
         centre, half = (start + end) / 2, (end - start) / 2
         dt = t - centre
         away = np.maximum(np.abs(dt) - half * (1.0 if vis == "rest" else 0.8), 0.0)
@@ -556,9 +626,11 @@ def blink_curves(num_frames: int, fps: float, rng: np.random.Generator,
 
 def motion_curves(phones: Sequence, words: Sequence, num_frames: int, fps: float = 25.0,
                   style: SpeakerStyle | None = None, rng: np.random.Generator | None = None,
-                  lexicon: dict[str, Emotion] | None = None) -> np.ndarray:
-    """All rig channels [num_frames, len(CHANNELS)]: visemes, expressions and blinks, in CHANNELS order."""
+                  lexicon: dict[str, Emotion] | None = None, *, alphabet: str = "espeak",
+                  loudness: np.ndarray | None = None) -> np.ndarray:
+    """All rig channels [num_frames, len(CHANNELS)]: visemes, expressions and blinks, in CHANNELS order
+    (`alphabet` and `loudness`: see viseme_curves)."""
     rng = rng if rng is not None else np.random.default_rng(0)
-    return np.concatenate([viseme_curves(phones, num_frames, fps, style),
+    return np.concatenate([viseme_curves(phones, num_frames, fps, style, alphabet=alphabet, loudness=loudness),
                            expression_curves(words, num_frames, fps, lexicon, style),
                            blink_curves(num_frames, fps, rng, style)], 1)
