@@ -294,3 +294,13 @@ def train_toy(toy, out, **kw):
     options.update(kw)
     return train(toy, out, **options)
 
+
+
+def rig_weights(frames: int, **channels) -> np.ndarray:
+    """Rig channel weights [frames, len(CHANNELS)]: the named channels set (a number or a [frames] array), the rest 0."""
+    from facegen.synth.rig import CHANNELS
+
+    w = np.zeros((frames, len(CHANNELS)), np.float32)
+    for name, value in channels.items():
+        w[:, CHANNELS.index(name)] = value
+    return w

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import rig_weights
 
 from facegen.align import Word
 from facegen.errors import FacegenError
@@ -17,7 +18,7 @@ from facegen.lipsync import (
     speech_mask,
     upper_face_response,
 )
-from facegen.synth.rig import CHANNELS, JAW_MAX_ANGLE, Rig
+from facegen.synth.rig import JAW_MAX_ANGLE, Rig
 
 FPS = 25.0
 # espeak mnemonics (the rig's phone set): "_" pause, p a b i: m A: then a pause
@@ -38,13 +39,6 @@ def rig(face):
     return Rig(face)
 
 
-def weights(T: int, **channels: float | np.ndarray) -> np.ndarray:
-    w = np.zeros((T, len(CHANNELS)), np.float32)
-    for name, value in channels.items():
-        w[:, CHANNELS.index(name)] = value
-    return w
-
-
 def test_rest_aperture_of_the_template(face, rig):
     geo = FaceGeometry.of(face)
     assert geo.cm == pytest.approx(rig.cm, rel=1e-9)  # 1 cm as the rig measures it
@@ -55,7 +49,7 @@ def test_rest_aperture_of_the_template(face, rig):
 
 
 def test_opening_the_jaw_raises_the_aperture_by_its_rotation(face, rig):
-    ap = aperture(rig.pose(weights(3, jaw_open=np.array([0.0, 0.5, 1.0]))), face)
+    ap = aperture(rig.pose(rig_weights(3, jaw_open=np.array([0.0, 0.5, 1.0]))), face)
     assert ap[0] == pytest.approx(aperture(face.vertices[None], face)[0], abs=1e-6)
     # the lower margin turns rigidly about the hinge by JAW_MAX_ANGLE, the upper one stays
     geo = FaceGeometry.of(face)
@@ -118,7 +112,7 @@ def test_the_rig_seals_the_lips_on_p_b_m_and_an_open_mouth_does_not(face, rig, t
     m = lipsync_metrics(v, v, face, FPS, speech=speech, bilabials=mid)
     assert m["bilabials"] == 3 and m["bilabial_closure_rate"] == 1.0
     assert m["bilabial_aperture_mm"] == pytest.approx(0.0, abs=1e-3)
-    held_open = rig.pose(weights(T, jaw_open=0.5))
+    held_open = rig.pose(rig_weights(T, jaw_open=0.5))
     m = lipsync_metrics(held_open, v, face, FPS, speech=speech, bilabials=mid)
     assert m["bilabial_closure_rate"] == 0.0 and m["bilabial_aperture_mm"] > 5
     assert m["ref_bilabial_closure_rate"] == 1.0
@@ -132,7 +126,7 @@ def test_stillness(face, rig, talking):
     assert m["rest_motion_mm"] == 0.0
     assert m["rest_aperture_mm"] == pytest.approx(0.978, abs=5e-3)
     assert m["aperture_r"] is None  # a constant aperture has no correlation
-    chewing = rig.pose(weights(T, jaw_open=0.3 + 0.3 * np.sin(np.arange(T))))
+    chewing = rig.pose(rig_weights(T, jaw_open=0.3 + 0.3 * np.sin(np.arange(T))))
     m = lipsync_metrics(chewing, v, face, FPS, speech=speech)
     assert m["rest_motion_mm"] > 1.0
     m = lipsync_metrics(still, v, face, FPS)  # without a speech mask: no stillness measures
@@ -141,11 +135,11 @@ def test_stillness(face, rig, talking):
 
 def test_upper_face_motion(face, rig, talking):
     v, speech, _ = talking
-    brows = rig.pose(weights(T, brow_raise=np.where(speech, 0.6, 0.2)))
+    brows = rig.pose(rig_weights(T, brow_raise=np.where(speech, 0.6, 0.2)))
     m = lipsync_metrics(brows, v, face, FPS, speech=speech)
     assert m["upper_face_speech_mm"] > m["upper_face_rest_mm"] > 0.1
     assert m["upper_face_speech_ratio"] == pytest.approx(3.0, rel=1e-3)  # brow_raise is a linear offset
-    assert upper_face_response(rig.pose(weights(T, brow_raise=0.2)), rig.pose(weights(T, brow_raise=0.6)),
+    assert upper_face_response(rig.pose(rig_weights(T, brow_raise=0.2)), rig.pose(rig_weights(T, brow_raise=0.6)),
                                face) == pytest.approx(3.0, rel=1e-3)
 
 
