@@ -15,11 +15,15 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
+
+if TYPE_CHECKING:
+    from facegen.synth.rig import Rig
 
 MAX_LAG = 3  # frames searched either way for the best-lag aperture correlation
 OPEN_MM = 2.0  # reference aperture above which a frame counts as open (the face's rest gap is ~1 mm)
@@ -277,21 +281,23 @@ def upper_face_response(neutral_vertices: np.ndarray, emotional_vertices: np.nda
 
 # ----------------------------------------------------------------------------------------- reference
 def rig_reference(phones: Sequence, words: Sequence, num_frames: int, fps: float,
-                  mesh: Mesh | None = None) -> np.ndarray:
+                  mesh: Mesh | Rig | None = None) -> np.ndarray:
     """The reference animation [num_frames, V, 3] (float32) for a recording with these phone and word
-    timings (e.g. from forced alignment): facegen's rig on `mesh` (default: the procedural face,
-    templates/face.ply) with the neutral speaker style and no blinks. Phones are in the rig's phone set
+    timings (e.g. from forced alignment): facegen's rig with the neutral speaker style and no blinks.
+
+    `mesh`: the face (a Mesh, or a facegen.synth.rig.Rig built on it to reuse across calls; default: the
+    procedural face, templates/face.ply, rigged once). Phones are in the rig's phone set
     (facegen.synth.rig.phone_visemes); emotional words move the upper face as in the synthetic corpus."""
     from facegen.synth.rig import CHANNELS, Rig, motion_curves
 
-    rig = _template_rig() if mesh is None else Rig(mesh)
+    rig = _template_rig() if mesh is None else mesh if isinstance(mesh, Rig) else Rig(mesh)
     curves = motion_curves(phones, words, int(num_frames), fps, rng=np.random.default_rng(0))
     curves[:, CHANNELS.index("blink")] = 0.0
     return rig.pose(curves)
 
 
 @functools.cache
-def _template_rig():
+def _template_rig() -> Rig:
     """The rig on templates/face.ply, built once."""
     from facegen.synth.face import load_template
     from facegen.synth.rig import Rig
