@@ -29,10 +29,10 @@ MAX_LAG = 3  # frames searched either way for the best-lag aperture correlation
 OPEN_MM = 2.0  # reference aperture above which a frame counts as open (the face's rest gap is ~1 mm)
 CROSSED_MM = -0.5  # aperture below which the lips are crossed
 CLOSED_MM = 1.0  # aperture below which the lips are closed
+STILL_MM = 1e-3  # upper-face motion below this is none (float32 rounding of the template is ~1e-7 mm)
 SPEECH_PAD = 0.1  # s, added to each side of a word or phone by speech_mask
 REGIONS = ("mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball", "lips", "upper_face")
 _SILENCE = ("_", "+", "<", "[")  # espeak pauses (_), pocketsphinx fillers (+NSN+, <sil>, [NOISE])
-_BILABIALS_CMU = frozenset({"P", "B", "M"})
 
 # the targets of issue 10 (on a held-out synthesiser and on recorded human speech): key -> (low, high)
 TARGETS: dict[str, tuple[float | None, float | None]] = {
@@ -132,20 +132,18 @@ def speech_mask(items: Sequence, num_frames: int, fps: float, pad: float = SPEEC
     return mask
 
 
-def is_bilabial(name: str) -> bool:
-    """Whether a phone closes the lips: p, b, m as espeak mnemonics (the rig's PBM viseme) or CMU phones."""
-    from facegen.synth.rig import phone_visemes
+def bilabial_midpoints(phones: Sequence, fps: float, alphabet: str = "espeak") -> np.ndarray:
+    """Frame indices (int64) of the midpoints of the p, b and m phones (the rig's PBM viseme in `alphabet`,
+    "espeak" or "cmu"): round((start + end) / 2 · fps), the frame the rig closes the lips on even for a
+    bilabial shorter than a frame."""
+    from facegen.synth.rig import ALPHABETS, phone_visemes
 
-    return phone_visemes(name) == ("PBM",) or name.strip() in _BILABIALS_CMU
-
-
-def bilabial_midpoints(phones: Sequence, fps: float) -> np.ndarray:
-    """Frame indices (int64) of the midpoints of the p, b and m phones: round((start + end) / 2 · fps),
-    the frame the rig closes the lips on even for a bilabial shorter than a frame."""
+    if alphabet not in ALPHABETS:
+        raise FacegenError(f"unknown phone alphabet {alphabet!r}: use one of {', '.join(ALPHABETS)}")
     out = []
     for phone in phones:
         name, start, end = _timing(phone)
-        if end > start and is_bilabial(name):
+        if end > start and phone_visemes(name, alphabet) == ("PBM",):
             out.append(round((start + end) / 2 * fps))
     return np.asarray(out, np.int64)
 
@@ -184,7 +182,7 @@ def _mean(x: np.ndarray) -> float | None:
 
 
 def _ratio(num: float | None, den: float | None) -> float | None:
-    return None if num is None or den is None or den <= 0 else num / den
+    return None if num is None or den is None or den < STILL_MM else num / den
 
 
 def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: Mesh | FaceGeometry,
@@ -209,7 +207,8 @@ def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: M
       the same of ref; rest_aperture_mm: median pred aperture over non-speech frames; rest_motion_mm: mean
       over consecutive non-speech frame pairs of the mean lip-vertex displacement between them;
       upper_face_speech_mm / upper_face_rest_mm: mean displacement of the upper-face vertices from the
-      template over speech / non-speech frames, upper_face_speech_ratio = speech / non-speech;
+      template over speech / non-speech frames, upper_face_speech_ratio = speech / non-speech (None
+      when the upper face is still outside speech, < STILL_MM);
       upper_face_response (with `emotional`).
     """
     geo = FaceGeometry.of(mesh)
@@ -270,28 +269,31 @@ def upper_face_response(neutral_vertices: np.ndarray, emotional_vertices: np.nda
                         mesh: Mesh | FaceGeometry) -> float:
     """How much more the upper face moves for emotional words than for neutral words on the same audio:
     the ratio (emotional / neutral) of the mean over frames of the RMS displacement of the upper-face
-    vertices from the template (inf when only the neutral face is still, 1 when both are)."""
+    vertices from the template (inf when only the neutral face is still, 1 when both are: < STILL_MM)."""
     geo = FaceGeometry.of(mesh)
     neutral = _mean(_upper_face(_frames(neutral_vertices, geo, "the neutral vertices"), geo, rms=True)) or 0.0
     emotional = _mean(_upper_face(_frames(emotional_vertices, geo, "the emotional vertices"), geo, rms=True)) or 0.0
-    if neutral <= 0:
-        return 1.0 if emotional <= 0 else float("inf")
+    if neutral < STILL_MM:
+        return 1.0 if emotional < STILL_MM else float("inf")
     return emotional / neutral
 
 
 # ----------------------------------------------------------------------------------------- reference
 def rig_reference(phones: Sequence, words: Sequence, num_frames: int, fps: float,
-                  mesh: Mesh | Rig | None = None) -> np.ndarray:
+                  mesh: Mesh | Rig | None = None, *, alphabet: str = "espeak",
+                  loudness: np.ndarray | None = None) -> np.ndarray:
     """The reference animation [num_frames, V, 3] (float32) for a recording with these phone and word
     timings (e.g. from forced alignment): facegen's rig with the neutral speaker style and no blinks.
 
     `mesh`: the face (a Mesh, or a facegen.synth.rig.Rig built on it to reuse across calls; default: the
-    procedural face, templates/face.ply, rigged once). Phones are in the rig's phone set
-    (facegen.synth.rig.phone_visemes); emotional words move the upper face as in the synthetic corpus."""
+    procedural face, templates/face.ply, rigged once). `alphabet` ("espeak" mnemonics or "cmu" phones)
+    and `loudness` (the recording's facegen.synth.rig.loudness_envelope: prosody) go to the rig's
+    motion_curves; emotional words move the upper face as in the synthetic corpus."""
     from facegen.synth.rig import CHANNELS, Rig, motion_curves
 
     rig = _template_rig() if mesh is None else mesh if isinstance(mesh, Rig) else Rig(mesh)
-    curves = motion_curves(phones, words, int(num_frames), fps, rng=np.random.default_rng(0))
+    curves = motion_curves(phones, words, int(num_frames), fps, rng=np.random.default_rng(0), alphabet=alphabet,
+                           loudness=loudness)
     curves[:, CHANNELS.index("blink")] = 0.0
     return rig.pose(curves)
 

@@ -144,12 +144,14 @@ def test_upper_face_motion(face, rig, talking):
                                face) == pytest.approx(3.0, rel=1e-3)
 
 
-def test_emotional_words_raise_the_upper_face(face):
+def test_emotional_words_raise_the_upper_face(face, rig):
     words = [("we", 0.2, 0.45), ("saw", 0.45, 0.7), ("it", 0.7, 1.0)]
     neutral = rig_reference(PHONES, words, T, FPS)
     emotional = rig_reference(PHONES, [words[0], Word("amazing", 0.45, 0.7), words[2]], T, FPS)
     assert np.array_equal(aperture(neutral, face), aperture(emotional, face))  # the words move no lip
-    assert upper_face_response(neutral, emotional, face) > 1.5
+    assert upper_face_response(neutral, emotional, face) == float("inf")  # the rig: no words, no motion
+    fidgety = rig.pose(rig_weights(T, brow_raise=0.1))  # a neutral face that moves a little
+    assert 1.5 < upper_face_response(fidgety, emotional, face) < 10
     assert upper_face_response(neutral, neutral, face) == pytest.approx(1.0)
     m = lipsync_metrics(neutral, neutral, face, FPS, emotional=emotional)
     assert m["upper_face_response"] > 1.5
@@ -161,10 +163,27 @@ def test_speech_mask_and_bilabials():
     assert list(np.nonzero(mask)[0]) == [4, 5, 6, 7]
     assert list(np.nonzero(speech_mask([("t", 0.803, 0.807)], 30, 10.0, pad=0.0))[0]) == [8]
     assert list(np.nonzero(speech_mask([Word("hello", 0.0, 0.5)], 20, FPS, pad=0.0))[0]) == list(range(13))
-    # espeak mnemonics with stress marks and CMU phones both count; others do not
-    phones = [("'b", 0.0, 0.1), ("m-", 0.1, 0.2), ("P", 0.2, 0.3), ("M", 0.3, 0.4), ("n", 0.4, 0.5),
-              ("AA1", 0.5, 0.6), ("b", 0.6, 0.6)]
-    assert list(bilabial_midpoints(phones, 10.0)) == [0, 2, 2, 4]  # round() as the rig: 0.5 -> 0, 2.5 -> 2
+    # espeak mnemonics (stress marks allowed) or CMU phones, as the rig reads them
+    phones = [("'b", 0.0, 0.1), ("m-", 0.1, 0.2), ("p", 0.2, 0.3), ("n", 0.3, 0.4), ("b", 0.6, 0.6)]
+    assert list(bilabial_midpoints(phones, 10.0)) == [0, 2, 2]  # round() as the rig: 0.5 -> 0, 2.5 -> 2
+    cmu = [("P", 0.0, 0.1), ("AA1", 0.1, 0.2), ("M", 0.3, 0.4), ("p", 0.4, 0.5), ("N", 0.5, 0.6)]
+    assert list(bilabial_midpoints(cmu, 10.0, alphabet="cmu")) == [0, 4, 4]
+    with pytest.raises(FacegenError, match="unknown phone alphabet 'ipa'"):
+        bilabial_midpoints(cmu, 10.0, alphabet="ipa")
+
+
+def test_the_reference_reads_cmu_phones_and_loudness(face, talking):
+    v, _, mid = talking
+    cmu = [("SIL", 0.0, 0.2), ("P", 0.2, 0.28), ("AE1", 0.28, 0.45), ("B", 0.45, 0.52), ("IY0", 0.52, 0.7),
+           ("M", 0.7, 0.78), ("AA2", 0.78, 1.0), ("SIL", 1.0, 1.4)]
+    assert list(bilabial_midpoints(cmu, FPS, alphabet="cmu")) == list(mid)
+    ref = rig_reference(cmu, [], T, FPS, alphabet="cmu")
+    m = lipsync_metrics(ref, v, face, FPS, speech=speech_mask(cmu, T, FPS), bilabials=mid)
+    assert m["bilabial_closure_rate"] == 1.0 and m["aperture_r"] > 0.9  # the same motion, near enough
+    # louder second half: the rig opens the mouth wider there (prosody)
+    loud = np.where(np.arange(140) < 60, -30.0, -10.0).astype(np.float32)  # dB at 100 Hz
+    louder = aperture(rig_reference(PHONES, [], T, FPS, loudness=loud), face) - aperture(v, face)
+    assert louder[22:25].min() > 0.05 and louder[8:11].max() < 0  # AA (cm) wider, the first a narrower
 
 
 def test_out_of_range_bilabials_are_dropped(face, talking):
