@@ -321,9 +321,8 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
     env = dict(os.environ)
     package_root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
-    threads = str(max(1, (os.cpu_count() or 1) // min(workers, len(order))))
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        env.setdefault(var, threads)
+        env.setdefault(var, "1")  # BLAS sums differ with the thread count: keep it independent of `workers`
 
     def job(speaker: str) -> None:
         if stopping.is_set():
