@@ -408,6 +408,8 @@ def write_alignment(words: list[Word], path: str | os.PathLike, duration: float 
 
 
 def _textgrid(words: list[Word], duration: float | None) -> str:
+    """Long-format TextGrid text with times to the microsecond (praatio's writer prints them as repr or
+    integers, e.g. "xmax = 2", so ours is kept)."""
     end = max([duration or 0.0] + [w.end for w in words])
     intervals: list[tuple[float, float, str]] = []
     t = 0.0
