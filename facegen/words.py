@@ -287,8 +287,8 @@ def _read_whisperx(data: dict) -> list[Word]:
 
 
 _TEXTGRID_HEADER = re.compile(r'File type = "ooTextFile"\s+Object class = "TextGrid"')
-# praatio reads "xmin = -0.5" as 0.5: refuse a negative time before it does
-_NEGATIVE_TIME = re.compile(r"^\s*(?:(?:xmin|xmax|number)\s*=\s*)?-\s*\d", re.MULTILINE)
+# praatio reads "xmin = -0.5" as 0.5: refuse a negative time before it does ("-0" is a valid start)
+_NEGATIVE_TIME = re.compile(r"^\s*(?:(?:xmin|xmax|number)\s*=\s*)?(-[\d.]+)\s*$", re.MULTILINE)
 
 
 def _read_textgrid(text: str) -> list[Word]:
@@ -299,8 +299,8 @@ def _read_textgrid(text: str) -> list[Word]:
 
     if not _TEXTGRID_HEADER.match(text):
         raise ValueError("not a text TextGrid (save it from Praat as a text file)")
-    if m := _NEGATIVE_TIME.search(text):
-        raise ValueError(f"negative time {m.group().strip()!r}")
+    if negative := [t for t in _NEGATIVE_TIME.findall(text) if float(t) < 0]:
+        raise ValueError(f"negative time {negative[0]}")
     try:
         tiers = parseTextgridStr(text, includeEmptyIntervals=False)["tiers"]
     except PraatioException as exc:
