@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
 
     rng = np.random.default_rng(1)
     starts = np.sort(rng.uniform(0, 600, 1500))
-    from facegen.align import Word
+    from facegen.words import Word
 
     spans = [Word("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, 1500), strict=True)]
     vectors = rng.normal(size=(1500, 384)).astype(np.float32)

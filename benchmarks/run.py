@@ -113,8 +113,8 @@ def make_clip(folder: Path, seconds: float, name: str) -> tuple[Path, Path, floa
     """Synthesised speech of about `seconds` (whole sentences, 0.3 s pauses) at 16 kHz, and its transcript."""
     import soundfile as sf
 
+    from facegen.espeak import synthesize
     from facegen.synth.sentences import SENTENCES
-    from facegen.synth.speech import synthesize
 
     sentences = list(SENTENCES.values())
     if seconds < 10:  # one sentence, spoken at the rate that makes it last `seconds`

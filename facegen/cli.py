@@ -145,9 +145,9 @@ def render(input_file, output, compare, model, template, fps, size, views, error
               help="words.json or words.TextGrid (default: JSON on stdout).")
 def align(audio, text, text_file, output):
     """Find when each word of the transcript is spoken in AUDIO."""
-    from facegen import align as al
     from facegen.audio import check_speech, load_audio
     from facegen.pipeline import get_words
+    from facegen.words import write_alignment
 
     _one_of(text=text, text_file=text_file)
     if output and Path(output).suffix.lower() not in (".json", ".textgrid"):
@@ -156,7 +156,7 @@ def align(audio, text, text_file, output):
     check_speech(samples, sr, 25.0, name=f"audio file {audio}")
     words, _ = get_words(samples, sr, text=_read_text(text, text_file), warn=_progress(False))
     if output:
-        al.write_alignment(words, output)
+        write_alignment(words, output)
     else:
         click.echo(json.dumps({"words": [{"word": w.text, "start": w.start, "end": w.end} for w in words]}, indent=1))
 

@@ -486,10 +486,11 @@ class Dataset:
     def words(self, seq: Sequence, samples: np.ndarray, sr: int) -> list:
         """Word timings: the user's alignment file, else the transcript aligned once (and cached)."""
         from facegen import align
+        from facegen.words import read_alignment, write_alignment
 
         duration = len(samples) / sr
         if seq.alignment is not None:
-            return align.read_alignment(seq.alignment, duration=duration)
+            return read_alignment(seq.alignment, duration=duration)
         if seq.text is None:
             raise _BadSequence(f"no transcript text/{seq.name}.txt or alignment alignments/{seq.name}.json "
                                "for the text modality")
@@ -498,12 +499,12 @@ class Dataset:
         cached = self.cache_dir / "alignments" / f"{seq.name}-{key}.json"
         if cached.is_file():
             with contextlib.suppress(FacegenError):  # a damaged cache entry is recomputed
-                return align.read_alignment(cached, duration=duration)
+                return read_alignment(cached, duration=duration)
         if not transcript.strip():
             return []
         words = align.align(samples, sr, transcript)
         cached.parent.mkdir(parents=True, exist_ok=True)
-        align.write_alignment(words, cached)  # atomically
+        write_alignment(words, cached)  # atomically
         return words
 
     def load(self, sequences: SequenceABC[Sequence], features: FeatureConfig, filters: np.ndarray,
@@ -619,7 +620,7 @@ class FeatureCache:
         text_path = self.folder / f"{seq.name}.text-{_digest(text_key)}.safetensors"
         text = self._get(text_path)
         if text is None:
-            from facegen.align import Word
+            from facegen.words import Word
 
             words = [Word(t, s, e) for t, s, e in words_json]
             text = text_features(words, self.backend, mel.shape[0], self.config.fps)
@@ -687,7 +688,7 @@ class DatasetWriter:
         if transcript is not None:
             self.write_transcript(name, transcript)
         if words is not None:
-            from facegen.align import write_alignment
+            from facegen.words import write_alignment
 
             (self.root / "alignments").mkdir(exist_ok=True)
             write_alignment(words, self.root / "alignments" / f"{name}.json")  # atomically

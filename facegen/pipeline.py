@@ -33,10 +33,11 @@ def get_words(
 ) -> tuple[list, str]:
     """Word timings for the clip and where they came from (alignment file, forced alignment, recognition)."""
     from facegen import align
+    from facegen.words import read_alignment
 
     duration = len(samples) / sr
     if alignment is not None:
-        return align.read_alignment(alignment, duration=duration), "alignment file"
+        return read_alignment(alignment, duration=duration), "alignment file"
     if text is not None:
         if not text.strip():
             raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")

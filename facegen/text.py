@@ -33,7 +33,7 @@ _CACHE: dict[tuple[str, str], TextBackend] = {}
 
 
 class TimedWord(Protocol):
-    """What this module needs of a word (``facegen.align.Word`` has it): text and times in seconds."""
+    """What this module needs of a word (``facegen.words.Word`` has it): text and times in seconds."""
 
     text: str
     start: float

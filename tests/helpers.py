@@ -15,13 +15,13 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from facegen.align import Word
 from facegen.animation import Animation
 from facegen.audio import FeatureConfig, mel_filters
 from facegen.bundle import Bundle, save_bundle
 from facegen.data import DatasetWriter, Splits
 from facegen.mesh import Mesh
 from facegen.model import FaceModel, ModelConfig
+from facegen.words import Word
 
 
 def make_bundle(template: Mesh, path: Path | None = None, *, speakers=("F2", "F3", "M3"),

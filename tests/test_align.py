@@ -9,18 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from facegen.align import (
-    Word,
-    align,
-    espeak_to_cmu,
-    normalize_transcript,
-    pronounce,
-    read_alignment,
-    recognize,
-    write_alignment,
-)
+from facegen.align import align, recognize
 from facegen.errors import FacegenError
-from facegen.synth.speech import Speech, synthesize
+from facegen.espeak import Speech, espeak_to_cmu, pronounce, synthesize
+from facegen.words import Word, normalize_transcript, read_alignment, write_alignment
 
 SENTENCES = [
     ("The quick brown fox jumps over the lazy dog.", "en-us", 50, 170),

@@ -22,7 +22,7 @@ def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def work(tmp_path_factory, biwi_template):
-    from facegen.synth.speech import synthesize
+    from facegen.espeak import synthesize
 
     d = tmp_path_factory.mktemp("cli")
     speech = synthesize(SENTENCE, voice="en-us", pitch=40, rate=165)

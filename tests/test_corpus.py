@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from facegen.data import Dataset, Splits
+from facegen.data import Dataset, Splits, sequence_name
 from facegen.errors import FacegenError
 from facegen.synth import corpus
 from facegen.synth.face import NUM_VERTICES
@@ -18,7 +18,7 @@ from facegen.synth.sentences import SENTENCES
 
 SPEAKERS = ("F2", "M1")
 NUMBERS = (1, 7)  # e01 has "amazed" (surprise), e07 no emotional word
-NAMES = [corpus.sequence_name(s, n) for s in SPEAKERS for n in NUMBERS]
+NAMES = [sequence_name(s, n) for s in SPEAKERS for n in NUMBERS]
 
 
 @pytest.fixture(scope="module")
@@ -183,7 +183,7 @@ def test_selection_and_splits():
     paper = corpus.selection(preset="paper")
     assert sum(len(v) for v in paper.values()) == 6 * 48 + 8 * 12
     assert paper["F2"] == tuple(range(1, 49)) and paper["M6"] == tuple(range(37, 49))
-    names = {corpus.sequence_name(s, n) for s, ns in paper.items() for n in ns}
+    names = {sequence_name(s, n) for s, ns in paper.items() for n in ns}
     default, unseen = Splits(), Splits(test_sentences=range(41, 49))
     for splits in (default, unseen):
         for split in ("train", "val", "test-a", "test-b"):

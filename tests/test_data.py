@@ -152,8 +152,8 @@ def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     it = items[0]
     assert it.num_frames == round((1.0 + 0.08) * FPS) == it.mel.shape[0] == it.text.shape[0]
     assert it.mel.shape[1] == 128 and it.text.shape[1] == gpt2_backend.dim
-    from facegen.align import read_alignment
     from facegen.text import text_features
+    from facegen.words import read_alignment
 
     words = read_alignment(toy / "alignments" / "F2_e01.json")
     np.testing.assert_array_equal(it.text, text_features(words, gpt2_backend, it.num_frames, FPS))
@@ -254,7 +254,7 @@ def test_missing_dataset_parts_are_explained(tmp_path):
 
 
 def test_transcripts_are_aligned_once_and_cached(tmp_path, gpt2_backend, monkeypatch):
-    from facegen.synth.speech import synthesize
+    from facegen.espeak import synthesize
 
     speech = synthesize("please open the window", rate=160)
     writer = DatasetWriter(tmp_path / "d")

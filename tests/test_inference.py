@@ -195,7 +195,7 @@ def test_device_selection_and_fallback():
 @pytest.fixture(scope="module")
 def clips(tmp_path_factory, face):
     """Three synthesised sentences of different lengths, with their true word timings as alignments."""
-    from facegen.synth.speech import synthesize
+    from facegen.espeak import synthesize
 
     d = tmp_path_factory.mktemp("clips")
     out = []

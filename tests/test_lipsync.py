@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import rig_weights
 
-from facegen.align import Word
+from facegen.words import Word
 from facegen.errors import FacegenError
 from facegen.lipsync import (
     FaceGeometry,

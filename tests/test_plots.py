@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from helpers import TOY_SPLITS, _train, grid_face, make_bundle, make_dataset
 
-from facegen.align import Word
 from facegen.bundle import load_bundle
 from facegen.plots import (
     correlation_map,
@@ -20,6 +19,7 @@ from facegen.plots import (
     word_frames,
     write_plots,
 )
+from facegen.words import Word
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -248,7 +248,7 @@ def test_speaker_style_changes_amplitude():
 
 
 def test_visemes_from_real_speech():
-    speech = pytest.importorskip("facegen.synth.speech")
+    speech = pytest.importorskip("facegen.espeak")
     spoken = speech.synthesize("Bob bought a map", voice="en-us")
     frames = int(np.ceil(spoken.duration * FPS))
     curves = viseme_curves(spoken.phones, frames, FPS)

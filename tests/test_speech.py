@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from facegen.align import Word
+from facegen.atomic import atomic_path
+from facegen.audio import write_wav
 from facegen.errors import FacegenError
-from facegen.synth.speech import Speech, phonemize, synthesize, write_wav
+from facegen.espeak import Speech, phonemize, synthesize
+from facegen.words import Word
 
 # 14 distinct speakers as the synthetic corpus will use them: (voice with variant, pitch, rate)
 VOICES = [("en-us", 50, 170), ("en-us+f3", 70, 160), ("en+m2", 35, 180), ("en-us+m3", 45, 150),
@@ -198,7 +200,9 @@ def test_phonemize_gives_espeak_phonemes():
 
 
 def test_write_wav_round_trips(hello, tmp_path):
-    path = write_wav(hello, tmp_path / "hello.wav")
+    path = tmp_path / "hello.wav"
+    with atomic_path(path) as tmp:
+        write_wav(hello.audio, hello.sample_rate, tmp)
     data, sr = sf.read(path, dtype="float32")
     assert sr == hello.sample_rate and len(data) == len(hello.audio)
     assert np.max(np.abs(data - hello.audio)) < 1e-4

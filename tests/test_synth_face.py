@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from facegen.errors import FacegenError
-from facegen.mesh import read_mesh
+from facegen.mesh import read_mesh, surface_area
 from facegen.synth import face as F
 from facegen.synth.face import (
     NUM_VERTICES,
@@ -17,7 +17,6 @@ from facegen.synth.face import (
     make_face,
     speaker_face,
     speaker_params,
-    surface_area,
     write_templates,
 )
 

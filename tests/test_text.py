@@ -23,7 +23,7 @@ from facegen.text import (
 
 @dataclass
 class W:
-    """Same fields as facegen.align.Word."""
+    """Same fields as facegen.words.Word."""
 
     text: str
     start: float

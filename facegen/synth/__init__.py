@@ -1,1 +1,2 @@
-"""Synthetic data: procedural face, rig and synthetic speech (libespeak-ng)."""
+"""Synthetic data: the procedural face, its rig, the emotional lexicon and sentences, and the synthetic
+corpus (speech from facegen.espeak)."""

@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from facegen.atomic import atomic_path
+from facegen.data import sequence_name
 from facegen.errors import FacegenError
 from facegen.synth.sentences import SENTENCES
 
@@ -100,10 +101,6 @@ def speaker_index(name: str) -> int:
     return list(SPEAKERS).index(name)
 
 
-def sequence_name(speaker: str, sentence: int) -> str:
-    return f"{speaker}_e{sentence:02d}"
-
-
 # ------------------------------------------------------------------------------------------ selection
 def selection(speakers: str | Iterable[str] | None = None, sentences: str | Iterable[int] | None = None,
               preset: str | None = None) -> dict[str, tuple[int, ...]]:
@@ -140,8 +137,8 @@ def sequence_rng(seed: int, speaker: str, sentence: int) -> np.random.Generator:
 
 
 def speak(speaker: str, sentence: int):
-    """The speech of one sentence by one speaker (facegen.synth.speech.Speech)."""
-    from facegen.synth.speech import synthesize
+    """The speech of one sentence by one speaker (facegen.espeak.Speech)."""
+    from facegen.espeak import synthesize
 
     v = SPEAKERS[speaker]
     return synthesize(SENTENCES[sentence], v.language, v.pitch, v.rate, v.variant)
@@ -193,7 +190,7 @@ def parameters(seed: int, fps: float) -> dict:
             "voices": digest({k: asdict(v) for k, v in SPEAKERS.items()})}
 
 
-def read_manifest(out: str | os.PathLike) -> dict | None:
+def _read_corpus_manifest(out: Path) -> dict | None:
     path = Path(out) / MANIFEST
     if not path.is_file():
         return None
@@ -206,7 +203,7 @@ def read_manifest(out: str | os.PathLike) -> dict | None:
     return data
 
 
-def _write_manifest(out: Path, manifest: dict) -> None:
+def _write_corpus_manifest(out: Path, manifest: dict) -> None:
     with atomic_path(out / MANIFEST) as tmp:
         tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
@@ -235,7 +232,7 @@ def synthesize_corpus(out: str | os.PathLike, speakers: str | Iterable[str] | No
     wanted = selection(speakers, sentences, preset)
     out = Path(out)
     params = parameters(seed, fps)
-    manifest = read_manifest(out) if out.is_dir() else None
+    manifest = _read_corpus_manifest(out) if out.is_dir() else None
     if manifest is not None and manifest["params"] != params:
         raise FacegenError(f"{out} holds a synthetic corpus made with other parameters "
                            f"({_difference(manifest['params'], params)}): choose another folder or delete it")
@@ -259,7 +256,7 @@ def synthesize_corpus(out: str | os.PathLike, speakers: str | Iterable[str] | No
     writer = DatasetWriter(out)
     _check_space(out, total, fps)
     _write_static(out, writer, wanted, read_templates_pkl)
-    _write_manifest(out, manifest)
+    _write_corpus_manifest(out, manifest)
     if total:
         _run(out, todo, seed, fps, workers, progress, manifest, report)
     report.seconds = time.monotonic() - started
@@ -316,7 +313,7 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
         message = json.loads(line)
         with lock:
             manifest["sequences"][message["name"]] = message["info"]
-            _write_manifest(out, manifest)
+            _write_corpus_manifest(out, manifest)
             report.generated.append(message["name"])
             report.durations[message["name"]] = message["info"]["duration"]
             bar.update(1)
@@ -324,9 +321,8 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
     env = dict(os.environ)
     package_root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
-    threads = str(max(1, (os.cpu_count() or 1) // min(workers, len(order))))
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        env.setdefault(var, threads)
+        env.setdefault(var, "1")  # BLAS sums differ with the thread count: keep it independent of `workers`
 
     def job(speaker: str) -> None:
         if stopping.is_set():

@@ -22,14 +22,14 @@ import argparse
 import functools
 import hashlib
 import os
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh, read_mesh, read_region, write_region
+from facegen.mesh import Mesh, read_mesh, read_region, unit_area, write_mesh, write_region
 
 NUM_VERTICES = 23370
 GRID_COLUMNS, GRID_ROWS = 123, 176  # skin grid
@@ -349,8 +349,7 @@ def _grid_faces(slits: dict) -> np.ndarray:
 
 def _cap(rings: int, segments: int, theta_max: float) -> tuple[np.ndarray, np.ndarray]:
     """Unit sphere cap around +Z: (theta, psi) per vertex and outward triangles."""
-    theta = [0.0]
-    psi = [0.0]
+    theta, psi = [0.0], [0.0]
     for k in range(1, rings + 1):
         for m in range(segments):
             theta.append(theta_max * k / rings)
@@ -527,22 +526,9 @@ def make_face(params: FaceParams | None = None) -> Mesh:
     if len(pts) != NUM_VERTICES:
         raise AssertionError(f"face has {len(pts)} vertices, expected {NUM_VERTICES}")
     pts = _speaker_warp(pts, p)
-    pts = normalise(pts, faces)
+    pts = unit_area(pts, faces)
     regions = {name: idx.copy() for name, idx in _template_regions().items()}
     return Mesh(pts.astype(np.float32), faces.astype(np.int32), regions)
-
-
-def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:
-    v = np.asarray(vertices, np.float64)
-    return float(0.5 * np.linalg.norm(np.cross(v[faces[:, 1]] - v[faces[:, 0]],
-                                               v[faces[:, 2]] - v[faces[:, 0]]), axis=1).sum())
-
-
-def normalise(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """BIWI's normalisation: subtract the mean vertex, divide by the square root of the surface area."""
-    v = np.asarray(vertices, np.float64)
-    v = v - v.mean(0)
-    return v / np.sqrt(surface_area(v, faces))
 
 
 # ------------------------------------------------------------------------------------------- speakers
@@ -563,7 +549,6 @@ def speaker_params(speaker_index: int) -> FaceParams:
     digest = hashlib.sha256(f"facegen-speaker-{speaker_index}".encode()).digest()
     u = np.frombuffer(digest, dtype=np.uint8)[: len(_RANGES)] / 255.0
     values = {name: lo + (hi - lo) * float(k) for (name, (lo, hi)), k in zip(_RANGES.items(), u)}
-    assert set(values) <= {f.name for f in fields(FaceParams)}
     return replace(FaceParams(), **values)
 
 
@@ -573,20 +558,6 @@ def speaker_face(speaker_index: int) -> Mesh:
 
 
 # ------------------------------------------------------------------------------------------- files
-def write_ply(vertices: np.ndarray, faces: np.ndarray, path: str | os.PathLike) -> None:
-    """Write a small binary PLY (float32 vertices, int32 triangles), atomically."""
-    v = np.ascontiguousarray(vertices, "<f4")
-    f = np.asarray(faces, "<i4")
-    header = ("ply\nformat binary_little_endian 1.0\ncomment facegen procedural face\n"
-              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
-              f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n").encode()
-    rec = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-    rec["n"] = 3
-    rec["i"] = f
-    with atomic_path(path) as tmp:
-        Path(tmp).write_bytes(header + v.tobytes() + rec.tobytes())
-
-
 def write_templates(folder: str | os.PathLike) -> list[Path]:
     """Write the neutral face: face.ply, lve.txt (lips), fdd.txt (upper face) and regions/<name>.txt
     for every other region (the rig's layout). Returns the paths written."""
@@ -594,7 +565,8 @@ def write_templates(folder: str | os.PathLike) -> list[Path]:
     (folder / "regions").mkdir(parents=True, exist_ok=True)
     mesh = make_face()
     written = [folder / "face.ply"]
-    write_ply(mesh.vertices, mesh.faces, written[0])
+    with atomic_path(written[0]) as tmp:
+        write_mesh(mesh, tmp)  # binary PLY: float32 vertices, int32 triangles
     targets = [(folder / f, mesh.regions[r]) for f, r in REGION_FILES.items()]
     targets += [(folder / "regions" / f"{name}.txt", idx) for name, idx in sorted(mesh.regions.items())
                 if name not in REGION_FILES.values()]
@@ -620,8 +592,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m facegen.synth.face",
                                      description="Write the procedural neutral face and its region files.")
     parser.add_argument("folder", nargs="?", default="templates")
-    args = parser.parse_args(argv)
-    for path in write_templates(args.folder):
+    for path in write_templates(parser.parse_args(argv).folder):
         print(path)
 
 

@@ -71,7 +71,6 @@ SENTENCES: dict[int, str] = {
     48: "She was elated to hear that the stupendous old theatre would open again.",
 }
 
-TRAIN_SENTENCES = tuple(range(1, 41))  # e01-e40: the BIWI-like sentences (train, val and test splits)
 UNSEEN_SENTENCES = tuple(range(41, 49))  # e41-e48: held-out emotional words only ("test-unseen")
 
 

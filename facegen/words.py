@@ -1,0 +1,431 @@
+"""Words and their times: `Word`, transcript normalisation (what a recogniser hears: lower case,
+numbers spelled out with num2words) and the alignment file formats (Gentle, WhisperX and plain JSON,
+Praat/MFA TextGrid, CSV).
+
+Words keep the user's spelling (`Word.text`); `normalize_transcript` gives the spoken tokens of each.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import re
+import unicodedata
+from dataclasses import dataclass
+from pathlib import Path
+
+from facegen.atomic import atomic_path
+from facegen.errors import FacegenError
+
+TOLERANCE = 0.05  # how far (s) read times may run past the audio's end
+
+
+@dataclass
+class Word:
+    """A word of the transcript as the user wrote it (edge punctuation stripped) and its time in seconds."""
+
+    text: str
+    start: float
+    end: float
+
+
+# --------------------------------------------------------------------------------------------------
+# transcript normalisation
+
+_KEEP_AT_EDGES = set("%$€£¥#&@+")
+
+
+def strip_edges(token: str) -> str:
+    """`token` without punctuation at its edges (symbols such as $ and % are kept; case kept)."""
+    start, end = 0, len(token)
+    while start < end and _is_punct(token[start]):
+        start += 1
+    while end > start and _is_punct(token[end - 1]):
+        end -= 1
+    return token[start:end]
+
+
+def _is_punct(ch: str) -> bool:
+    return ch not in _KEEP_AT_EDGES and unicodedata.category(ch)[0] in "PSZC"
+
+
+_CURRENCIES = {"$": ("dollar", "dollars", "cent", "cents"), "€": ("euro", "euros", "cent", "cents"),
+               "£": ("pound", "pounds", "penny", "pence"), "¥": ("yen", "yen", "sen", "sen")}
+_SYMBOLS = {"&": "and", "+": "plus", "@": "at", "%": "percent", "#": "number", "=": "equals"}
+_MULTIPLIERS = {"k": "thousand", "m": "million", "bn": "billion", "b": "billion"}
+_SPELLED_OUT = 10**15  # from here on, numbers are said digit by digit
+
+
+def _said(n: int, to: str = "cardinal") -> list[str]:
+    """num2words' English as spoken tokens: 342 → three hundred forty two (no "and", no hyphens)."""
+    from num2words import num2words
+
+    return [w for w in re.split(r"[\s,-]+", num2words(n, to=to)) if w and w != "and"]
+
+
+def _digits(digits: str) -> list[str]:
+    return [word for d in digits for word in _said(int(d))]
+
+
+def cardinal(n: int) -> list[str]:
+    """English words for a non-negative integer: 342 → three hundred forty two."""
+    return _digits(str(n)) if n >= _SPELLED_OUT else _said(n)
+
+
+def ordinal(n: int) -> list[str]:
+    """English ordinal words: 3 → third, 21 → twenty first."""
+    if n >= _SPELLED_OUT:
+        return _digits(str(n)[:-1]) + _said(n % 10, "ordinal")
+    return _said(n, "ordinal")
+
+
+def _integer(digits: str) -> list[str]:
+    if len(digits) > 1 and digits.startswith("0"):
+        return _digits(digits)  # 007 → zero zero seven
+    n = int(digits)
+    if len(digits) == 4 and (1100 <= n <= 1999 or 2010 <= n <= 2099):
+        return _said(n, "year")  # 1990 → nineteen ninety, 1905 → nineteen oh five, 1900 → nineteen hundred
+    return cardinal(n)
+
+
+def _number(text: str) -> list[str]:
+    """Words for "1,234", "3.14", "42"."""
+    whole, _, frac = text.replace(",", "").partition(".")
+    words = _integer(whole) if whole else ["zero"]
+    if frac:
+        words += ["point"] + _digits(frac)
+    return words
+
+
+def _plural(words: list[str]) -> list[str]:
+    last = words[-1]
+    last = last[:-1] + "ies" if last.endswith("y") else last + ("es" if last.endswith("x") else "s")
+    return words[:-1] + [last]
+
+
+_NUM = r"\d{1,3}(?:,\d{3})+(?:\.\d+)?|\d+(?:\.\d+)?|\.\d+"
+_RE_CURRENCY = re.compile(rf"([$€£¥])({_NUM})(k|m|bn|b)?", re.IGNORECASE)
+_RE_PERCENT = re.compile(rf"({_NUM})%")
+_RE_ORDINAL = re.compile(r"(\d+)(st|nd|rd|th)", re.IGNORECASE)
+_RE_DECADE = re.compile(r"(\d+0)'?s")
+_RE_NUMBER = re.compile(_NUM)
+_RE_PIECE = re.compile(r"\d+|[^\W\d_]+(?:'[^\W\d_]+)*", re.UNICODE)
+
+
+def _spoken(token: str) -> list[str]:
+    """The spoken words for one written word (already edge-stripped)."""
+    token = token.replace("’", "'").replace("‘", "'")
+    if m := _RE_CURRENCY.fullmatch(token):
+        symbol, amount, mult = m.groups()
+        one, many, sub_one, sub_many = _CURRENCIES[symbol]
+        if mult:
+            return _number(amount) + [_MULTIPLIERS[mult.lower()], many]
+        whole, _, frac = amount.replace(",", "").partition(".")
+        words = cardinal(int(whole or 0)) + [one if whole == "1" else many]
+        if frac and len(frac) == 2 and int(frac):
+            words += ["and"] + cardinal(int(frac)) + [sub_one if frac == "01" else sub_many]
+        elif frac:
+            words = _number(amount) + [many]
+        return words
+    if m := _RE_PERCENT.fullmatch(token):
+        return _number(m.group(1)) + ["percent"]
+    if m := _RE_ORDINAL.fullmatch(token):
+        return ordinal(int(m.group(1)))
+    if m := _RE_DECADE.fullmatch(token):
+        return _plural(_integer(m.group(1)))
+    if _RE_NUMBER.fullmatch(token):
+        return _number(token)
+    words: list[str] = []
+    for piece in re.split(r"([&+@%#=])", token):
+        if piece in _SYMBOLS:
+            words.append(_SYMBOLS[piece])
+            continue
+        for m in _RE_PIECE.finditer(piece):
+            part = m.group()
+            words += _integer(part) if part.isdigit() else [part.lower()]
+    return words
+
+
+def normalize_transcript(text: str) -> list[tuple[str, list[str]]]:
+    """For each whitespace-separated word of `text`: (the word, edge punctuation stripped; its spoken tokens).
+
+    Spoken tokens are lower case without punctuation, numbers spelled out ("42" → ["forty", "two"],
+    "3rd" → ["third"], "$5" → ["five", "dollars"]). Words made only of punctuation are left out.
+    """
+    out = []
+    for raw in text.split():
+        word = strip_edges(raw)
+        if not word:
+            continue
+        spoken = _spoken(word)
+        if spoken:
+            out.append((word, spoken))
+    return out
+
+
+
+# --------------------------------------------------------------------------------------------------
+# alignment files: Gentle JSON, Praat/MFA TextGrid, WhisperX JSON, plain JSON, CSV
+
+_PAUSE_LABELS = {"", "sil", "sp", "<eps>", "<sil>", "{sl}", "#"}
+
+
+def read_alignment(path: str | os.PathLike, duration: float | None = None) -> list[Word]:
+    """Read word timings from a Gentle / WhisperX / plain JSON, Praat or MFA TextGrid, or CSV file.
+
+    The format is detected from the content. Pauses and words not found in the audio are left out.
+    With `duration` (s), times past the audio's end (beyond a small tolerance) are an error, as are
+    negative, reversed or overlapping times; the error names the file and the problem.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FacegenError(f"cannot read alignment {path} ({exc.strerror}): check the path") from exc
+    text = _decode_text(raw).lstrip()
+    try:
+        if text.startswith('File type = "ooTextFile"') or path.suffix.lower() == ".textgrid":
+            words = _read_textgrid(text)
+        elif text.startswith(("{", "[")):
+            words = _read_json(json.loads(text))
+        else:
+            words = _read_csv(text)
+    except (ValueError, KeyError, TypeError, IndexError) as exc:  # json.JSONDecodeError is a ValueError
+        raise FacegenError(f"alignment {path} is malformed ({exc}): write it as Gentle/WhisperX/plain JSON, "
+                           "a TextGrid or a CSV with word,start,end columns") from exc
+    _validate(words, path, duration)
+    return words
+
+
+def _decode_text(raw: bytes) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # Praat writes UTF-16 when the text needs it
+        return raw.decode("utf-16")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _word(text: object, start: object, end: object) -> Word | None:
+    """A Word from file values; None for a pause or punctuation."""
+    label = strip_edges(str(text).strip())
+    if label.lower() in _PAUSE_LABELS:
+        return None
+    return Word(label, _seconds(start), _seconds(end))
+
+
+def _seconds(value: object) -> float:
+    if isinstance(value, bool) or value is None or value == "":
+        raise ValueError(f"missing or invalid time {value!r}")
+    number = float(value)  # ValueError for text
+    if not math.isfinite(number):
+        raise ValueError(f"time {value!r} is not a finite number")
+    return number
+
+
+def _read_json(data: object) -> list[Word]:
+    if isinstance(data, dict) and ("segments" in data or "word_segments" in data):
+        return _read_whisperx(data)
+    items = data["words"] if isinstance(data, dict) else data
+    if not isinstance(items, list):
+        raise TypeError('expected a list of words or {"words": [...]}')
+    gentle = any(isinstance(it, dict) and ("case" in it or "alignedWord" in it) for it in items)
+    words = []
+    for item in items:
+        if not isinstance(item, dict):
+            raise TypeError(f"word entry {item!r} is not an object")
+        if gentle:  # Gentle: only "success" words have times
+            if item.get("case", "success") != "success" or "start" not in item:
+                continue
+            word = _word(item.get("word", item.get("alignedWord", "")), item["start"], item["end"])
+        else:
+            label = item["word"] if "word" in item else item["text"]
+            word = _word(label, item["start"], item["end"])
+        if word:
+            words.append(word)
+    return words
+
+
+def _read_whisperx(data: dict) -> list[Word]:
+    """WhisperX (or Whisper with word timestamps): segments[].words[], else word_segments[].
+
+    Words WhisperX could not time (often numbers) are placed in the gap between their neighbours.
+    """
+    segments = data.get("segments") or []
+    if not isinstance(segments, list):
+        raise TypeError("'segments' is not a list")
+    items = [w for seg in segments for w in seg.get("words", [])] or data.get("word_segments") or []
+    labels = [str(it["word"] if "word" in it else it["text"]) for it in items]
+    starts = [it.get("start") for it in items]
+    ends = [it.get("end") for it in items]
+    i = 0
+    while i < len(items):  # fill runs of untimed words between timed neighbours
+        if starts[i] is not None and ends[i] is not None:
+            i += 1
+            continue
+        j = i
+        while j < len(items) and (starts[j] is None or ends[j] is None):
+            j += 1
+        left = _seconds(ends[i - 1]) if i > 0 else None
+        right = _seconds(starts[j]) if j < len(items) else None
+        if left is not None and right is not None and right >= left:
+            step = (right - left) / (j - i)
+            for k in range(i, j):
+                starts[k], ends[k] = left + step * (k - i), left + step * (k - i + 1)
+        i = j
+    words = []
+    for label, start, end in zip(labels, starts, ends, strict=True):
+        if start is None or end is None:
+            continue  # untimed at the edges: nothing to place it by
+        word = _word(label, start, end)
+        if word:
+            words.append(word)
+    return words
+
+
+_TEXTGRID_HEADER = re.compile(r'File type = "ooTextFile"\s+Object class = "TextGrid"')
+# praatio reads "xmin = -0.5" as 0.5: refuse a negative time before it does ("-0" is a valid start)
+_NEGATIVE_TIME = re.compile(r"^\s*(?:(?:xmin|xmax|number)\s*=\s*)?(-[\d.]+)\s*$", re.MULTILINE)
+
+
+def _read_textgrid(text: str) -> list[Word]:
+    """Praat TextGrid, long or short text format (parsed by praatio): the `words` tier, else the first
+    interval tier."""
+    from praatio.utilities.errors import PraatioException
+    from praatio.utilities.textgrid_io import parseTextgridStr
+
+    if not _TEXTGRID_HEADER.match(text):
+        raise ValueError("not a text TextGrid (save it from Praat as a text file)")
+    if negative := [t for t in _NEGATIVE_TIME.findall(text) if float(t) < 0]:
+        raise ValueError(f"negative time {negative[0]}")
+    try:
+        tiers = parseTextgridStr(text, includeEmptyIntervals=False)["tiers"]
+    except PraatioException as exc:
+        raise ValueError(str(exc)) from exc
+    intervals = [t for t in tiers if t["class"] == "IntervalTier"]
+    if not intervals:
+        raise ValueError("no interval tier")
+    named = [t for t in intervals if re.search(r"\bwords?$", t["name"].strip().lower())]  # MFA: "spk - words"
+    words = []
+    for start, end, label in (named or intervals)[0]["entries"]:
+        word = _word(label, start, end)
+        if word:
+            words.append(word)
+    return words
+
+
+def _read_csv(text: str) -> list[Word]:
+    """CSV/TSV with a header naming word (or text/label), start and end; or 3 columns without one."""
+    first = text.split("\n", 1)[0]
+    delimiter = next((d for d in "\t,;" if d in first), ",")
+    rows = [r for r in csv.reader(io.StringIO(text), delimiter=delimiter) if any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError("the file is empty")
+    header = [c.strip().lower() for c in rows[0]]
+    names = {"word": ("word", "text", "label", "token"), "start": ("start", "begin", "onset", "start_time"),
+             "end": ("end", "stop", "offset", "end_time")}
+    columns = {key: next((header.index(a) for a in alias if a in header), None)
+               for key, alias in names.items()}
+    if all(v is not None for v in columns.values()):
+        order, rows = (columns["word"], columns["start"], columns["end"]), rows[1:]
+    else:
+        if any(len(r) != 3 for r in rows):
+            raise ValueError("rows without a word,start,end header must have exactly 3 columns")
+
+        def numeric(cell: str) -> bool:
+            try:
+                float(cell)
+                return True
+            except ValueError:
+                return False
+
+        row = rows[0]
+        text_cols = [i for i, c in enumerate(row) if not numeric(c)]
+        if len(text_cols) != 1:
+            raise ValueError(f"cannot tell the word column from the times in row {row}")
+        word_col = text_cols[0]
+        start_col, end_col = [i for i in range(3) if i != word_col]
+        order = (word_col, start_col, end_col)
+    words = []
+    for n, row in enumerate(rows, 1):
+        if len(row) <= max(order):
+            raise ValueError(f"row {n} has too few columns")
+        word = _word(row[order[0]], row[order[1]].strip(), row[order[2]].strip())
+        if word:
+            words.append(word)
+    return words
+
+
+def _validate(words: list[Word], path: Path, duration: float | None) -> None:
+    def fail(problem: str) -> FacegenError:
+        return FacegenError(f"alignment {path}: {problem}: fix the file or align again")
+
+    if not words:
+        raise fail("it contains no timed words")
+    previous = None
+    for w in words:
+        if w.start < 0 or w.end < 0:
+            raise fail(f"word {w.text!r} has a negative time ({w.start:g}-{w.end:g} s)")
+        if w.end < w.start:
+            raise fail(f"word {w.text!r} ends before it starts ({w.start:g}-{w.end:g} s)")
+        if previous and (w.start < previous.start or w.start < previous.end - 0.01):
+            raise fail(f"times are not in order: {w.text!r} at {w.start:g} s starts before "
+                       f"{previous.text!r} ({previous.start:g}-{previous.end:g} s) ends")
+        previous = w
+    if duration is not None and words[-1].end > duration + TOLERANCE:
+        raise fail(f"word {words[-1].text!r} ends at {words[-1].end:g} s, after the audio's end at "
+                   f"{duration:g} s (is it the alignment of another recording?)")
+
+
+def write_alignment(words: list[Word], path: str | os.PathLike, duration: float | None = None) -> Path:
+    """Write words as our plain JSON ({"words": [{"word", "start", "end"}]}), a TextGrid or a CSV.
+
+    The format follows the suffix (.json, .TextGrid, .csv). A TextGrid gets a `words` interval tier
+    with empty intervals for pauses, spanning 0 to `duration` (default: the last word's end).
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        payload = {"words": [{"word": w.text, "start": round(w.start, 6), "end": round(w.end, 6)}
+                             for w in words]}
+        content = json.dumps(payload, indent=1, ensure_ascii=False) + "\n"
+    elif suffix == ".textgrid":
+        content = _textgrid(words, duration)
+    elif suffix == ".csv":
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(["word", "start", "end"])
+        writer.writerows([w.text, f"{w.start:.6f}", f"{w.end:.6f}"] for w in words)
+        content = buffer.getvalue()
+    else:
+        raise FacegenError(f"cannot write alignment {path}: use a .json, .TextGrid or .csv file name")
+    with atomic_path(path) as tmp:
+        tmp.write_text(content, encoding="utf-8")
+    return path
+
+
+def _textgrid(words: list[Word], duration: float | None) -> str:
+    """Long-format TextGrid text with times to the microsecond (praatio's writer prints them as repr or
+    integers, e.g. "xmax = 2", so ours is kept)."""
+    end = max([duration or 0.0] + [w.end for w in words])
+    intervals: list[tuple[float, float, str]] = []
+    t = 0.0
+    for w in words:
+        if w.start > t + 1e-9:
+            intervals.append((t, w.start, ""))
+        intervals.append((max(w.start, t), w.end, w.text))
+        t = w.end
+    if end > t + 1e-9 or not intervals:
+        intervals.append((t, end, ""))
+    lines = ['File type = "ooTextFile"', 'Object class = "TextGrid"', "", "xmin = 0", f"xmax = {end:.6f}",
+             "tiers? <exists>", "size = 1", "item []:", "    item [1]:", '        class = "IntervalTier"',
+             '        name = "words"', "        xmin = 0", f"        xmax = {end:.6f}",
+             f"        intervals: size = {len(intervals)}"]
+    for k, (a, b, label) in enumerate(intervals, 1):
+        quoted = label.replace('"', '""')
+        lines += [f"        intervals [{k}]:", f"            xmin = {a:.6f}", f"            xmax = {b:.6f}",
+                  f'            text = "{quoted}"']
+    return "\n".join(lines) + "\n"
