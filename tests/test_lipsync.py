@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from helpers import rig_weights
 
-from facegen.words import Word
 from facegen.errors import FacegenError
 from facegen.lipsync import (
     FaceGeometry,
@@ -19,6 +18,7 @@ from facegen.lipsync import (
     upper_face_response,
 )
 from facegen.synth.rig import JAW_MAX_ANGLE, Rig
+from facegen.words import Word
 
 FPS = 25.0
 # espeak mnemonics (the rig's phone set): "_" pause, p a b i: m A: then a pause
