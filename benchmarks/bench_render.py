@@ -58,7 +58,8 @@ def main(argv: list[str] | None = None) -> int:
 
     start = time.perf_counter()
     from facegen.animation import Animation
-    from facegen.render import default_threads, render_animation
+    from facegen.render import render_animation
+    from facegen.render.video import default_threads
 
     anim = talking_clip()
     print(

@@ -13,15 +13,9 @@ from facegen.animation import Animation
 from facegen.errors import FacegenError
 from facegen.exchange import write_animation
 from facegen.mesh import Mesh, write_mesh
-from facegen.render import (
-    BACKGROUND,
-    Renderer,
-    face_colors,
-    frame_cameras,
-    render,
-    render_animation,
-    render_still,
-)
+from facegen.render import render, render_animation, render_still
+from facegen.render.overlay import TEXT, compare_overlay
+from facegen.render.raster import BACKGROUND, Renderer, face_colors, frame_cameras, heat_colors
 
 FPS = 25.0
 RATE = 16000
@@ -179,6 +173,39 @@ def test_compare_is_twice_as_wide_with_the_error_painted_on_b(face, tmp_path):
     assert b_redness(FRAMES - 3, moved) > b_redness(2, moved) + 60
     still = face.regions["upper_face"]
     assert abs(b_redness(FRAMES - 3, still) - b_redness(2, still)) < 4
+
+
+@pytest.mark.parametrize("size", [SIZE, 512])
+def test_compare_captions_are_text_in_the_title_strips_and_a_colour_bar(size):
+    views, vmax, face_size = 2, 0.0123, 1.5
+    half, width = size * views, 2 * size * views
+    labels = ("A: prediction.usda", "B: " + "ground_truth_" * 20 + ".npy")  # B's far too long for its half
+    ys, xs, rgb = compare_overlay(size, views, vmax, face_size, labels)
+    assert len(ys) == len(xs) == len(rgb) and rgb.dtype == np.uint8
+    assert ys.min() >= 0 and ys.max() < size and xs.min() >= 0 and xs.max() < width  # inside the frame
+    ink = np.abs(rgb.astype(np.float32) - np.asarray(TEXT) * 255).max(-1) < 40  # text-coloured pixels
+    strip = size // 8  # the title strip: rows above the face (which fills the middle 84%)
+    for left, right in ((0, half), (half, width)):
+        title = ink & (ys < strip) & (xs >= left) & (xs < right)
+        rows, cols = np.ptp(ys[title]) + 1, np.ptp(xs[title]) + 1
+        assert title.sum() > 20 and 6 <= rows < strip and cols > 4 * rows  # a line of legible text
+        assert xs[title].max() < right - 2  # cut to fit its half
+    assert not ((ys > strip) & (ys < size - strip)).any()  # nothing over the face
+    assert not ((ys >= size - strip) & (xs < half)).any()  # the scale line is in B's half only
+    # the colour bar: one unbroken run of pixels along a bottom row, grey (0) on the left to red (the top)
+    red = (ys >= size - strip) & (rgb[:, 0].astype(int) > rgb[:, 2].astype(int) + 60)
+    row = int(np.median(ys[red]))
+    run = np.flatnonzero(ys == row)
+    run = run[np.argsort(xs[run])]
+    breaks = np.flatnonzero(np.diff(xs[run]) > 1)
+    longest = max(np.split(run, breaks + 1), key=len)
+    ends = heat_colors(np.array([0.0, 1.0]), 1.0)
+    assert len(longest) > size // 4
+    assert np.abs(rgb[longest[[0, -1]]] / 255 - ends).max() < 0.02
+    assert (ink & (ys >= size - strip) & (xs > width - size // 2)).sum() > 20  # the scale's top value
+    # the captions say what they are given: other labels or another scale, other pixels
+    other = compare_overlay(size, views, 2 * vmax, face_size, ("A: other.usda", labels[1]))
+    assert len(other[0]) != len(ys) or not np.array_equal(other[2], rgb)
 
 
 def test_compare_frame_counts_topology_and_fps(grid_mesh, tmp_path):
