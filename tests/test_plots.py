@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 import pytest
-from helpers import TOY_SPLITS, _train, grid_face, make_bundle, make_dataset
+from helpers import TOY_SPLITS, grid_face, make_bundle, make_dataset, train_toy
 
 from facegen.bundle import load_bundle
 from facegen.plots import (
@@ -113,7 +113,7 @@ def trained(tmp_path_factory):
     gpt2 = make_tiny_gpt2(tmp_path_factory.mktemp("gpt2"), n_positions=64)
     toy = make_dataset(tmp_path_factory.mktemp("toy"), subjects=("F2", "F3"))  # with word alignments
     out = tmp_path_factory.mktemp("model") / "both.safetensors"
-    result = _train(toy, out, epochs=2, modalities="both", text_backend=str(gpt2))
+    result = train_toy(toy, out, epochs=2, modalities="both", text_backend=str(gpt2))
     return toy, out, result
 
 
