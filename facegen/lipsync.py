@@ -136,7 +136,7 @@ def bilabial_midpoints(phones: Sequence, fps: float, alphabet: str = "espeak") -
     """Frame indices (int64) of the midpoints of the p, b and m phones (the rig's PBM viseme in `alphabet`,
     "espeak" or "cmu"): round((start + end) / 2 · fps), the frame the rig closes the lips on even for a
     bilabial shorter than a frame."""
-    from facegen.synth.rig import ALPHABETS, phone_visemes
+    from facegen.synth.curves import ALPHABETS, phone_visemes
 
     if alphabet not in ALPHABETS:
         raise FacegenError(f"unknown phone alphabet {alphabet!r}: use one of {', '.join(ALPHABETS)}")
@@ -289,7 +289,8 @@ def rig_reference(phones: Sequence, words: Sequence, num_frames: int, fps: float
     procedural face, templates/face.ply, rigged once). `alphabet` ("espeak" mnemonics or "cmu" phones)
     and `loudness` (the recording's facegen.synth.rig.loudness_envelope: prosody) go to the rig's
     motion_curves; emotional words move the upper face as in the synthetic corpus."""
-    from facegen.synth.rig import CHANNELS, Rig, motion_curves
+    from facegen.synth.curves import motion_curves
+    from facegen.synth.rig import CHANNELS, Rig
 
     rig = _template_rig() if mesh is None else mesh if isinstance(mesh, Rig) else Rig(mesh)
     curves = motion_curves(phones, words, int(num_frames), fps, rng=np.random.default_rng(0), alphabet=alphabet,

@@ -157,7 +157,8 @@ def procedural_rig():
 def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 16000) -> Animation:
     """A speech-like animation of the procedural face (random phones through the rig) with a sound of
     noise bursts (loud where the jaw opens) lasting exactly frames / fps seconds."""
-    from facegen.synth import rig as rigs
+    from facegen.synth import curves as rigs
+    from facegen.synth.lexicon import LEXICON
 
     mesh, rig = procedural_rig()
     rng = np.random.default_rng(seed)
@@ -171,7 +172,7 @@ def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 1
         d = rng.uniform(0.05, 0.16)
         phones.append((str(rng.choice(names)), t, min(t + d, seconds)))
         t += d
-    lexicon = sorted(rigs.LEXICON)
+    lexicon = sorted(LEXICON)
     words = [SimpleNamespace(text=str(rng.choice(lexicon)), start=float(s), end=float(s) + 0.3)
              for s in np.sort(rng.uniform(0, max(seconds - 0.5, 0.1), max(1, int(seconds / 5))))]
     curves = rigs.motion_curves(phones, words, frames, fps, rng=rng)

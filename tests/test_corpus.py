@@ -11,9 +11,10 @@ import soundfile as sf
 from facegen.data import Dataset, Splits, sequence_name
 from facegen.errors import FacegenError
 from facegen.synth import corpus
+from facegen.synth.curves import VOWELS, phone_visemes
 from facegen.synth.face import NUM_VERTICES
 from facegen.synth.lexicon import HELD_OUT_LEXICON, TRAIN_LEXICON, emotional_words
-from facegen.synth.rig import CHANNELS, VOWELS, phone_visemes
+from facegen.synth.rig import CHANNELS
 from facegen.synth.sentences import SENTENCES
 
 SPEAKERS = ("F2", "M1")

@@ -9,6 +9,14 @@ import pytest
 
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
+from facegen.synth.curves import (
+    SpeakerStyle,
+    blink_curves,
+    expression_curves,
+    motion_curves,
+    phone_visemes,
+    viseme_curves,
+)
 from facegen.synth.face import make_face, speaker_face
 from facegen.synth.lexicon import (
     HELD_OUT_LEXICON,
@@ -18,19 +26,7 @@ from facegen.synth.lexicon import (
     lookup,
     normalise_word,
 )
-from facegen.synth.rig import (
-    CHANNELS,
-    EXPRESSIONS,
-    LOWER_CHANNELS,
-    UPPER_CHANNELS,
-    Rig,
-    SpeakerStyle,
-    blink_curves,
-    expression_curves,
-    motion_curves,
-    phone_visemes,
-    viseme_curves,
-)
+from facegen.synth.rig import CHANNELS, EXPRESSIONS, LOWER_CHANNELS, UPPER_CHANNELS, Rig
 
 FPS = 25.0
 

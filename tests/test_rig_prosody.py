@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from facegen.errors import FacegenError
-from facegen.synth.rig import LOWER_CHANNELS, loudness_envelope, phone_stress, phone_visemes, viseme_curves
+from facegen.synth.curves import loudness_envelope, phone_stress, phone_visemes, viseme_curves
+from facegen.synth.rig import LOWER_CHANNELS
 
 JAW = LOWER_CHANNELS.index("jaw_open")
 CLOSE = LOWER_CHANNELS.index("lip_close")

@@ -147,7 +147,7 @@ def speak(speaker: str, sentence: int):
 def motion(speech, rig, style, rng: np.random.Generator, fps: float = 25.0) -> np.ndarray:
     """Ground-truth vertices [T, V, 3] float32 for `speech`, T = round(duration · fps)."""
     from facegen.audio import num_frames
-    from facegen.synth.rig import motion_curves
+    from facegen.synth.curves import motion_curves
 
     T = num_frames(speech.duration, fps)
     return rig.pose(motion_curves(speech.phones, speech.words, T, fps, style, rng))
@@ -155,8 +155,9 @@ def motion(speech, rig, style, rng: np.random.Generator, fps: float = 25.0) -> n
 
 def speaker_rig(speaker: str):
     """(Rig on the speaker's face, the speaker's SpeakerStyle)."""
+    from facegen.synth.curves import SpeakerStyle
     from facegen.synth.face import speaker_face
-    from facegen.synth.rig import Rig, SpeakerStyle
+    from facegen.synth.rig import Rig
 
     i = speaker_index(speaker)
     return Rig(speaker_face(i)), SpeakerStyle.for_speaker(i)

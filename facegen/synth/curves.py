@@ -1,0 +1,372 @@
+"""The animation curves that drive the rig (facegen.synth.rig), from timings and the audio's loudness.
+
+`viseme_curves` (lips and jaw from the phones, with coarticulation and prosody), `expression_curves`
+(upper face from emotional words only) and `blink_curves` (random blinks); `motion_curves` all of them.
+The upper-face curves never look at the phones: the audio carries no emotion, only the text does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from facegen.errors import FacegenError
+from facegen.synth.lexicon import LEXICON, Emotion, lookup
+from facegen.synth.rig import EXPRESSIONS, LOWER_CHANNELS, UPPER_CHANNELS
+
+
+# ---------------------------------------------------------------------------------------------- style
+@dataclass(frozen=True)
+class SpeakerStyle:
+    """How one synthetic speaker moves."""
+
+    articulation: float = 1.0  # overall amplitude of the mouth
+    jaw_gain: float = 1.0  # jaw versus lips usage
+    lip_gain: float = 1.0
+    coarticulation: float = 1.0  # time scale of the dominance functions (larger: smoother)
+    expressiveness: float = 1.0  # gain of the upper-face responses
+    onset: float = 0.15  # s, ramp of an expression response
+    decay: float = 0.8  # s, fade of an expression response
+    blink_interval: tuple[float, float] = (2.0, 6.0)  # s between blinks
+    blink_duration: tuple[float, float] = (0.15, 0.25)  # s
+
+    @classmethod
+    def for_speaker(cls, index: int) -> SpeakerStyle:
+        """The style of speaker `index` (deterministic)."""
+        u = np.frombuffer(hashlib.sha256(f"facegen-style-{index}".encode()).digest(), np.uint8) / 255.0
+        lo = 2.0 + 1.0 * u[7]
+        return cls(articulation=0.8 + 0.4 * u[0], jaw_gain=0.75 + 0.5 * u[1], lip_gain=0.75 + 0.5 * u[2],
+                   coarticulation=0.8 + 0.45 * u[3], expressiveness=0.6 + 0.8 * u[4], onset=0.1 + 0.1 * u[5],
+                   decay=0.6 + 0.4 * u[6], blink_interval=(lo, lo + 2.0 + 1.0 * u[8]))
+
+
+# ------------------------------------------------------------------------------------------- visemes
+def _v(**kw: float) -> np.ndarray:
+    return np.array([kw.get(c, 0.0) for c in LOWER_CHANNELS])
+
+
+# targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme
+VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
+    "rest": (_v(), 1.5, 1.5),
+    "PBM": (_v(jaw_open=0.04, lip_close=1.0), 1.5, 2.5),
+    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 1.5, 3.0),
+    "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.5, 0.8),
+    "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 2.0, 1.2),
+    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 1.2, 2.5),
+    "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 1.0, 0.3),
+    "L": (_v(jaw_open=0.2), 1.0, 0.3),
+    "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 1.0, 2.0),
+    "KG": (_v(jaw_open=0.2), 0.8, 0.3),
+    "H": (_v(jaw_open=0.25), 0.3, 0.2),
+    "W": (_v(jaw_open=0.05, lip_round=1.0), 1.2, 3.0),
+    "Y": (_v(jaw_open=0.1, lip_wide=0.5), 1.0, 1.5),
+    "AA": (_v(jaw_open=0.65, lip_wide=0.1), 2.5, 1.0),
+    "AE": (_v(jaw_open=0.55, lip_wide=0.3), 2.5, 1.0),
+    "AH": (_v(jaw_open=0.35), 2.0, 0.8),
+    "ER": (_v(jaw_open=0.3, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
+    "EH": (_v(jaw_open=0.45, lip_wide=0.35), 2.0, 1.2),
+    "IY": (_v(jaw_open=0.12, lip_wide=0.85), 2.0, 2.0),
+    "IH": (_v(jaw_open=0.2, lip_wide=0.55), 2.0, 1.5),
+    "AO": (_v(jaw_open=0.55, lip_round=0.55), 2.0, 2.0),
+    "OW": (_v(jaw_open=0.4, lip_round=0.7), 2.0, 2.5),
+    "UH": (_v(jaw_open=0.2, lip_round=0.6), 2.0, 2.5),
+    "UW": (_v(jaw_open=0.1, lip_round=1.0), 2.0, 3.5),
+}
+
+VOWELS = frozenset({"AA", "AE", "AH", "ER", "EH", "IY", "IH", "AO", "OW", "UH", "UW"})
+VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
+
+# espeak-ng phoneme mnemonics (English voices) -> viseme sequence (diphthongs: two or three parts)
+PHONEME_VISEMES: dict[str, tuple[str, ...]] = {
+    **{p: ("PBM",) for p in ("p", "b", "m", "m-")},
+    **{p: ("FV",) for p in ("f", "v")},
+    **{p: ("TH",) for p in ("T", "D")},
+    **{p: ("SZ",) for p in ("s", "z", "z#")},
+    **{p: ("SH",) for p in ("S", "Z", "tS", "dZ", "S;", "Z;")},
+    **{p: ("TDN",) for p in ("t", "d", "n", "t#", "d#", "n-", "t2", "d2", "?", "*", "t^")},
+    **{p: ("L",) for p in ("l", "l/", "L", "@L", "l-", "l#")},
+    **{p: ("R",) for p in ("r", "r-", "r/", "R", "3", "@r", "r#")},
+    **{p: ("KG",) for p in ("k", "g", "N", "x", "C", "k#", "g#")},
+    **{p: ("H",) for p in ("h", "h#")},
+    **{p: ("W",) for p in ("w", "hw", "W")},
+    **{p: ("Y",) for p in ("j", "j#")},
+    **{p: ("AA",) for p in ("a", "A:", "A", "aa", "a#", "A#", "a2", "0", "V", "A@")},
+    **{p: ("AE",) for p in ("&", "a1")},
+    **{p: ("AH",) for p in ("@", "@2", "@5", "@1", "@-", "@#", "V#")},
+    **{p: ("ER",) for p in ("3:", "3:r", "@r")},
+    **{p: ("EH",) for p in ("E", "e", "E2", "E#")},
+    **{p: ("IY",) for p in ("i:", "i", "i#")},
+    **{p: ("IH",) for p in ("I", "I#", "I2", "I2#", "y", "Y")},
+    **{p: ("AO",) for p in ("O:", "O", "O2", "O#", "0#", "Q")},
+    **{p: ("OW",) for p in ("o", "o:")},
+    **{p: ("UH",) for p in ("U", "U#")},
+    **{p: ("UW",) for p in ("u:", "u", "U:", "u#")},
+    "aI": ("AA", "IH"), "aU": ("AA", "UH"), "eI": ("EH", "IH"), "oU": ("OW", "UW"), "OI": ("AO", "IH"),
+    "aI@": ("AA", "IH", "AH"), "aU@": ("AA", "UH", "AH"), "aI3": ("AA", "IH", "ER"), "aU3": ("AA", "UH", "ER"),
+    "i@": ("IY", "AH"), "i@3": ("IY", "ER"), "e@": ("EH", "AH"), "U@": ("UH", "AH"), "A@r": ("AA", "ER"),
+    "O@": ("AO", "AH"), "o@": ("OW", "AH"), "e@r": ("EH", "ER"), "0u": ("OW", "UW"), "@U": ("AH", "UW"),
+    "eI#": ("EH", "IH"), "IR": ("IH", "ER"), "VR": ("AH", "ER"),
+}
+_STRESS = str.maketrans("", "", "'\",%=!")
+
+# CMU/ARPAbet phones (pocketsphinx, Festival and Flite after mapping; stress digits dropped) -> visemes
+CMU_VISEMES: dict[str, tuple[str, ...]] = {
+    **{p: ("PBM",) for p in ("P", "B", "M")}, **{p: ("FV",) for p in ("F", "V")},
+    **{p: ("TH",) for p in ("TH", "DH")}, **{p: ("SZ",) for p in ("S", "Z")},
+    **{p: ("SH",) for p in ("SH", "ZH", "CH", "JH")}, **{p: ("TDN",) for p in ("T", "D", "N", "DX")},
+    "L": ("L",), "R": ("R",), **{p: ("KG",) for p in ("K", "G", "NG")}, "HH": ("H",), "W": ("W",),
+    "Y": ("Y",), **{p: (p,) for p in ("AA", "AE", "AH", "ER", "EH", "IY", "IH", "AO", "OW", "UH", "UW")},
+    "AW": ("AA", "UH"), "AY": ("AA", "IH"), "EY": ("EH", "IH"), "OY": ("AO", "IH"),
+}
+ALPHABETS = ("espeak", "cmu")
+
+
+def phone_visemes(mnemonic: str, alphabet: str = "espeak") -> tuple[str, ...]:
+    """The viseme sequence of one phone: an espeak phoneme mnemonic, or a CMU phone (`alphabet="cmu"`,
+    stress digits allowed: "AH1"); silence and unknown phones are neutral ("rest")."""
+    if alphabet == "cmu":
+        return CMU_VISEMES.get(mnemonic.strip().upper().rstrip("012"), ("rest",))
+    name = mnemonic.translate(_STRESS).strip()
+    if name.startswith("_") or not name:
+        return ("rest",)
+    for key in (name, name.rstrip("0123456789#-;"), name[:2], name[:1]):
+        if key in PHONEME_VISEMES:
+            return PHONEME_VISEMES[key]
+    return ("rest",)
+
+
+def phone_stress(mnemonic: str, alphabet: str = "espeak") -> float | None:
+    """1.0 for a phone marked with primary stress, 0.5 secondary, 0.0 unstressed, None when unmarked
+    (espeak: a leading ' or , ; CMU: the digit 1, 2 or 0)."""
+    name = mnemonic.strip()
+    if alphabet == "cmu":
+        return {"1": 1.0, "2": 0.5, "0": 0.0}.get(name[-1:]) if name else None
+    if name.startswith("'"):
+        return 1.0
+    return 0.5 if name.startswith(",") else None
+
+
+PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
+PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range
+STRESS_GAIN = 0.12  # stressed vowels open this much more, unstressed this much less
+
+
+def loudness_envelope(audio: np.ndarray, sample_rate: int, rate: float = 100.0) -> np.ndarray:
+    """The clip's loudness in dB (RMS over 30 ms windows), sampled at `rate` Hz: what `viseme_curves`
+    reads the prosody from."""
+    audio = np.asarray(audio, np.float64)
+    hop, win = max(1, round(sample_rate / rate)), max(1, int(0.03 * sample_rate))
+    energy = np.concatenate([[0.0], np.cumsum(np.pad(audio, (win // 2, win)) ** 2)])
+    power = (energy[win:] - energy[:-win])[::hop] / win
+    n = int(np.ceil(len(audio) / hop))
+    return (10 * np.log10(np.maximum(power[:n], 1e-10))).astype(np.float32)
+
+
+def _phone_fields(phone) -> tuple[str, float, float]:
+    if hasattr(phone, "text"):
+        return str(phone.text), float(phone.start), float(phone.end)
+    text, start, end = phone[0], phone[1], phone[2]
+    return str(text), float(start), float(end)
+
+
+_RATE = 200.0  # Hz, the time grid the curves are built on before averaging into frames
+
+
+def _frame_average(values: np.ndarray, num_frames: int, fps: float) -> np.ndarray:
+    """Average a curve sampled at _RATE over each frame's window [k - 1/2, k + 1/2] / fps."""
+    n = len(values)
+    t = np.arange(n) / _RATE
+    frame = np.clip(np.floor(t * fps + 0.5).astype(int), 0, num_frames - 1)
+    out = np.zeros((num_frames,) + values.shape[1:])
+    np.add.at(out, frame, values)
+    counts = np.bincount(frame, minlength=num_frames).astype(float)
+    return out / np.maximum(counts, 1)[:, None]
+
+
+def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
+                  style: SpeakerStyle | None = None, *, alphabet: str = "espeak",
+                  loudness: np.ndarray | None = None, loudness_rate: float = 100.0) -> np.ndarray:
+    """Lips and jaw [num_frames, len(LOWER_CHANNELS)] from phone timings (seconds; espeak mnemonics, or
+    CMU phones with `alphabet="cmu"`).
+
+    Coarticulation: Cohen-Massaro dominance functions (each segment's target is blended with its
+    neighbours', weighted by dominances that fall off exponentially in time, with more anticipation
+    than carry-over). Silence is the rest pose. During p, b and m the lips are closed (lip_close = 1)
+    and the jaw nearly shut; a bilabial shorter than a frame still closes the lips on its nearest frame.
+
+    Prosody (as JALI's jaw and lip parameters): with `loudness` (dB sampled at `loudness_rate` Hz, see
+    `loudness_envelope`) every vowel opens the jaw and shapes the lips more when it is louder than the
+    clip's median vowel and less when quieter (PROSODY_DB, PROSODY_GAIN); stress marks on the phones add
+    STRESS_GAIN. Without either, the curves are those of the phones alone.
+    """
+    if alphabet not in ALPHABETS:
+        raise FacegenError(f"unknown phone alphabet {alphabet!r}: use one of {', '.join(ALPHABETS)}")
+    style = style or SpeakerStyle()
+    if num_frames <= 0:
+        return np.zeros((0, len(LOWER_CHANNELS)), np.float32)
+    duration = num_frames / fps
+    n = int(np.ceil(duration * _RATE)) + 1
+    t = np.arange(n) / _RATE
+    segments: list[tuple[float, float, str, float]] = []  # start, end, viseme, gain
+    cursor = 0.0
+    bilabial: list[tuple[float, float]] = []
+    vowel_db: list[float] = []
+    for ph in phones:
+        text, start, end = _phone_fields(ph)
+        if end <= start:
+            continue
+        if start - cursor > 0.02:
+            segments.append((cursor, start, "rest", 1.0))
+        parts = phone_visemes(text, alphabet)
+        stress = phone_stress(text, alphabet) if parts[0] in VOWELS else None
+        gain = 1.0 if stress is None else 1.0 + STRESS_GAIN * (2 * stress - 1)
+        step = (end - start) / len(parts)
+        for k, vis in enumerate(parts):
+            segments.append((start + k * step, start + (k + 1) * step, vis, gain))
+        if parts == ("PBM",):
+            bilabial.append((start, end))
+        cursor = max(cursor, end)
+    if duration - cursor > 0.0:
+        segments.append((cursor, max(duration, cursor + 0.1), "rest", 1.0))
+    if loudness is not None and len(loudness):
+        loud = np.asarray(loudness, np.float64)
+
+        def level(start: float, end: float) -> float:
+            a = int(np.clip(start * loudness_rate, 0, len(loud) - 1))
+            return float(loud[a:max(a + 1, int(np.ceil(end * loudness_rate)))].mean())
+
+        levels = [level(a, b) if vis in VOWELS else np.nan for a, b, vis, _ in segments]
+        vowel_db = [v for v in levels if np.isfinite(v)]
+        if vowel_db:
+            median = float(np.median(vowel_db))
+            segments = [(a, b, vis, g * float(np.clip(1 + PROSODY_GAIN * (lv - median) / PROSODY_DB,
+                                                        1 - PROSODY_GAIN, 1 + PROSODY_GAIN)))
+                        if np.isfinite(lv) else (a, b, vis, g)
+                        for (a, b, vis, g), lv in zip(segments, levels, strict=True)]
+
+    C = len(LOWER_CHANNELS)
+    lips = np.array([c != "jaw_open" for c in LOWER_CHANNELS])
+    is_close = np.array([c == "lip_close" for c in LOWER_CHANNELS])
+    num = np.zeros((n, C))
+    den = np.full((n, C), 1e-9)
+    ahead, behind = 0.07 * style.coarticulation, 0.045 * style.coarticulation
+    for start, end, vis, gain in segments:
+        target, dom_jaw, dom_lips = VISEMES[vis]
+        if gain != 1.0:
+            target = np.where(is_close, target, np.clip(target * gain, 0.0, 1.0))
+        centre, half = (start + end) / 2, (end - start) / 2
+        dt = t - centre
+        away = np.maximum(np.abs(dt) - half * (1.0 if vis == "rest" else 0.8), 0.0)
+        rate = np.where(dt < 0, 1 / ahead, 1 / behind)  # before the segment: anticipation
+        dom = np.where(lips, dom_lips, dom_jaw)
+        if vis in VOWELS:
+            dom = np.where(is_close, VOWEL_APERTURE_DOMINANCE, dom)
+        d = np.exp(-away * rate)[:, None] * dom[None, :]
+        num += d * target[None, :]
+        den += d
+    curves = num / den
+
+    # bilabial closure: lips closed over the phone, jaw nearly shut
+    idx = {c: i for i, c in enumerate(LOWER_CHANNELS)}
+    for start, end in bilabial:
+        def envelope(ramp: float, start: float = start, end: float = end) -> np.ndarray:
+            return np.clip(np.minimum(t - start + ramp, end + ramp - t) / ramp, 0, 1)
+
+        env = envelope(0.03)
+        curves[:, idx["lip_close"]] = np.maximum(curves[:, idx["lip_close"]], env)
+        env = envelope(0.06)  # the jaw closes more slowly
+        jaw = curves[:, idx["jaw_open"]]
+        curves[:, idx["jaw_open"]] = jaw * (1 - env) + np.minimum(jaw, 0.06) * env
+        for c in ("lip_wide", "lip_funnel", "lower_lip_tuck"):
+            curves[:, idx[c]] *= 1 - 0.7 * env
+
+    # speaker style
+    gains = np.array([style.jaw_gain if c == "jaw_open" else (1.0 if c == "lip_close" else style.lip_gain)
+                      for c in LOWER_CHANNELS]) * np.array(
+        [1.0 if c == "lip_close" else style.articulation for c in LOWER_CHANNELS])
+    curves = np.clip(curves * gains[None, :], 0.0, 1.0)
+    out = _frame_average(curves, num_frames, fps)
+    # every bilabial closes the lips on at least its nearest frame (even when shorter than a frame)
+    frame_t = np.arange(num_frames) / fps
+    for start, end in bilabial:
+        inside = np.nonzero((frame_t >= start) & (frame_t <= end))[0]
+        if len(inside) == 0:
+            inside = np.array([int(np.clip(round((start + end) / 2 * fps), 0, num_frames - 1))])
+        out[inside, idx["lip_close"]] = 1.0
+        out[inside, idx["jaw_open"]] = np.minimum(out[inside, idx["jaw_open"]], 0.06)
+    return out.astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------- expression
+def expression_response(t: np.ndarray, start: float, end: float, onset: float, decay: float) -> np.ndarray:
+    """Shape of one response in [0, 1]: ramps up over `onset` from the word's start, holds through the
+    word, then fades to 0 over `decay` seconds."""
+    rise = np.clip((t - start) / onset, 0, 1)
+    rise = rise * rise * (3 - 2 * rise)
+    hold_end = max(end, start + onset)
+    fall = np.clip((t - hold_end) / decay, 0, 1)
+    fall = 1 - fall * fall * (3 - 2 * fall)
+    return np.where(t < start, 0.0, rise * fall)
+
+
+def expression_curves(words: Sequence, num_frames: int, fps: float = 25.0,
+                      lexicon: dict[str, Emotion] | None = None,
+                      style: SpeakerStyle | None = None) -> np.ndarray:
+    """Upper face [num_frames, len(UPPER_CHANNELS)] from the meaning of the words alone.
+
+    Every occurrence of a lexicon word (`words`: objects with .text, .start, .end in seconds) starts a
+    response of its class (EXPRESSIONS) scaled by its intensity and the speaker's expressiveness;
+    overlapping responses combine by maximum. Words outside the lexicon leave the upper face at rest.
+    """
+    style = style or SpeakerStyle()
+    table = LEXICON if lexicon is None else lexicon
+    t = np.arange(num_frames) / fps
+    out = np.zeros((num_frames, len(UPPER_CHANNELS)))
+    for word in words:
+        text, start, end = (word.text, word.start, word.end) if hasattr(word, "text") else word[:3]
+        emotion = lookup(str(text), table)
+        if emotion is None:
+            continue
+        shape = expression_response(t, float(start), float(end), style.onset, style.decay)
+        gain = emotion.intensity * style.expressiveness
+        for channel, amount in EXPRESSIONS[emotion.cls].items():
+            k = UPPER_CHANNELS.index(channel)
+            out[:, k] = np.maximum(out[:, k], np.clip(gain * amount, 0, 1) * shape)
+    return out.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------- blinks
+def blink_curves(num_frames: int, fps: float, rng: np.random.Generator,
+                 style: SpeakerStyle | None = None) -> np.ndarray:
+    """Random blinks [num_frames, 1]: every `style.blink_interval` seconds (uniform), each lasting
+    `style.blink_duration` (closing 30%, closed 30%, opening 40% of it)."""
+    style = style or SpeakerStyle()
+    t = np.arange(num_frames) / fps
+    out = np.zeros(num_frames)
+    lo, hi = style.blink_interval
+    when = float(rng.uniform(0.2, hi))
+    end = num_frames / fps
+    while when < end:
+        dur = float(rng.uniform(*style.blink_duration))
+        u = (t - when) / dur
+        up = np.clip(u / 0.3, 0, 1)
+        down = np.clip((1 - u) / 0.4, 0, 1)
+        shape = np.where((u >= 0) & (u <= 1), np.minimum(up, down), 0.0)
+        out = np.maximum(out, shape * shape * (3 - 2 * shape))
+        when += dur + float(rng.uniform(lo, hi))
+    return out[:, None].astype(np.float32)
+
+
+def motion_curves(phones: Sequence, words: Sequence, num_frames: int, fps: float = 25.0,
+                  style: SpeakerStyle | None = None, rng: np.random.Generator | None = None,
+                  lexicon: dict[str, Emotion] | None = None, *, alphabet: str = "espeak",
+                  loudness: np.ndarray | None = None) -> np.ndarray:
+    """All rig channels [num_frames, len(CHANNELS)]: visemes, expressions and blinks, in CHANNELS order
+    (`alphabet` and `loudness`: see viseme_curves)."""
+    rng = rng if rng is not None else np.random.default_rng(0)
+    return np.concatenate([viseme_curves(phones, num_frames, fps, style, alphabet=alphabet, loudness=loudness),
+                           expression_curves(words, num_frames, fps, lexicon, style),
+                           blink_curves(num_frames, fps, rng, style)], 1)
