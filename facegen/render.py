@@ -59,7 +59,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from facegen.animation import Animation
+from facegen.animation import Animation, check_animation
 from facegen.atomic import atomic_path, check_writable
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
@@ -865,8 +865,6 @@ def render_animation(
     (default: the clip's largest error). Frame counts that differ by a few frames use the shorter clip
     (a note in the result); a topology mismatch is a FacegenError.
     """
-    from facegen.exchange import check_animation
-
     start = time.perf_counter()
     path = check_output(path)
     check_animation(anim)

@@ -48,10 +48,8 @@ def basis_for(anim: Animation, morph_targets: int | str | None, tolerance: float
 
     Vertices that never move in `anim` also get exactly zero offsets in every target and in `rest` (PCA
     leaves float rounding there, and a fixed K has no error budget to drop it), so BlendShapes can leave
-    them out; the error is measured again then. `morph_targets` may be a string ("12", "all": the CLI's).
+    them out; the error is measured again then. `morph_targets` as pca.parse_morph_targets takes it.
     """
-    if isinstance(morph_targets, str) and morph_targets.strip().isdigit():
-        morph_targets = int(morph_targets)
     basis = morph_basis(
         anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance),
         unit_weights=True, sparse=True,
