@@ -1,5 +1,6 @@
 """The checks every format's validator shares: faces, finite + displacement, audio, audio duration.
 
+  file            (its failure) the format's reader cannot open the file
   faces           the face list equals the template's; without a template, triangles whose indices are in
                   range
   finite          no NaN or infinite coordinate
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -20,6 +23,17 @@ from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
 from facegen.validate.report import Report
+
+Opened = TypeVar("Opened")
+
+
+def open_file(report: Report, opener: Callable[[Path], Opened], path: Path) -> Opened | None:
+    """`opener(path)` (a format's reader), or None after a failed "file" check when it raises FacegenError."""
+    try:
+        return opener(path)
+    except FacegenError as exc:
+        report.add("file", False, str(exc))
+        return None
 
 
 def check_faces(report: Report, faces: np.ndarray, template: Mesh | None, num_vertices: int | None) -> None:

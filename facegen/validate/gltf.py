@@ -34,7 +34,7 @@ from facegen.exchange import gltf as gltf_format
 from facegen.exchange import mp3, read_animation
 from facegen.exchange.wav import sidecar_path
 from facegen.mesh import Mesh
-from facegen.validate.checks import check_duration, check_faces, check_values, read_audio
+from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
@@ -80,10 +80,8 @@ def run_gltf_validator(path: str | os.PathLike, *, script: str | os.PathLike | N
 def check(report: Report, path: Path, expected: Expected) -> None:
     """Add the glTF checks for `path` to `report`; never raises for a bad file."""
     template, fps, require_audio = expected.template, expected.fps, expected.require_audio
-    try:
-        decoded = gltf_format.decode(path)
-    except FacegenError as exc:
-        report.add("file", False, str(exc))
+    decoded = open_file(report, gltf_format.decode, path)
+    if decoded is None:
         _khronos(report, path)
         return
     info = decoded["info"]

@@ -11,20 +11,17 @@ from __future__ import annotations
 from pathlib import Path
 
 from facegen.animation import DEFAULT_FPS
-from facegen.errors import FacegenError
 from facegen.exchange import npy as npy_format
 from facegen.exchange.wav import sidecar_path
-from facegen.validate.checks import check_duration, check_values, read_audio
+from facegen.validate.checks import check_duration, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
 
 
 def check(report: Report, path: Path, expected: Expected) -> None:
     """Add the .npy checks for `path` to `report`; never raises for a bad file."""
     template = expected.template
-    try:
-        data = npy_format.load_frames(path)
-    except FacegenError as exc:
-        report.add("file", False, str(exc))
+    data = open_file(report, npy_format.load_frames, path)
+    if data is None:
         return
     report.add("file", True, f"[{data.shape[0]}, {data.shape[1]}] {data.dtype} array")
     if template is None:

@@ -38,7 +38,7 @@ from facegen.errors import FacegenError
 from facegen.exchange import usd as usd_format
 from facegen.exchange import usd_skel
 from facegen.exchange import usdz as usdz_format
-from facegen.validate.checks import check_duration, check_faces, check_values, read_audio
+from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
 
 SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend (float32 sums), as a share of the face size
@@ -47,10 +47,8 @@ SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend (float32 sums),
 def check(report: Report, path: Path, expected: Expected) -> None:
     """Add the USD (or USDZ) checks for `path` to `report`; never raises for a bad file."""
     template, fps = expected.template, expected.fps
-    try:
-        stage = usd_format.open_stage(path)
-    except FacegenError as exc:
-        report.add("file", False, str(exc))
+    stage = open_file(report, usd_format.open_stage, path)
+    if stage is None:
         return
     report.add("file", True, f"opened as a USD stage ({stage.GetRootLayer().GetFileFormat().formatId})")
     mesh = usd_format.find_mesh(stage)
