@@ -54,10 +54,10 @@ def basis_for(anim: Animation, morph_targets: int | str | None, tolerance: float
         anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance),
         unit_weights=True, sparse=True,
     )
-    vertices = np.asarray(anim.vertices, dtype=np.float32)
-    moving = np.zeros(vertices.shape[1], bool)
-    for start in range(0, len(vertices), 256):  # in blocks: a [T, V, 3] boolean is large for long clips
-        moving |= np.any(vertices[start : start + 256] != np.asarray(anim.template, np.float32), axis=(0, 2))
+    moving = np.zeros(anim.num_vertices, bool)
+    template = np.asarray(anim.template, np.float32)
+    for _, block in anim.frame_blocks(256):  # in blocks: a [T, V, 3] boolean is large for long clips
+        moving |= np.any(block != template, axis=(0, 2))
     if moving.all():
         return basis
     basis = replace(basis, targets=basis.targets * moving[None, :, None], rest=basis.rest * moving[:, None])
