@@ -34,7 +34,7 @@ def animation(args):
             rng = np.random.default_rng(0)
             anim.audio = (0.1 * rng.standard_normal(int(anim.duration * 16000))).astype(np.float32)
         return anim, f"{args.npy}"
-    from test_exchange_gltf import rig_clip
+    from helpers import rig_clip
 
     return rig_clip(round(args.seconds * args.fps), fps=args.fps), "procedural face + rig, random phones"
 
@@ -51,15 +51,15 @@ def main() -> None:
     args = parser.parse_args()
 
     from facegen.exchange import gltf, write_animation
-    from facegen.exchange.pca import DEFAULT_TOLERANCE
-    from facegen.validate_gltf import run_gltf_validator
+    from facegen.exchange.pca import DEFAULT_TOLERANCE, parse_morph_targets
+    from facegen.validate.gltf import run_gltf_validator
 
     t0 = time.perf_counter()
     anim, source = animation(args)
     print(f"animation: {anim.num_frames} frames x {anim.num_vertices} vertices at {anim.fps:g} fps, "
           f"{anim.duration:.1f} s ({source}); made in {time.perf_counter() - t0:.1f} s", flush=True)
     tolerance = args.tolerance if args.tolerance is not None else DEFAULT_TOLERANCE
-    options = {"tolerance": tolerance, "morph_targets": gltf.parse_morph_targets(args.morph_targets)}
+    options = {"tolerance": tolerance, "morph_targets": parse_morph_targets(args.morph_targets)}
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "minute.glb"
         results = []

@@ -1,19 +1,30 @@
-"""The in-memory animation every writer reads and every reader returns."""
+"""The in-memory animation every writer reads and every reader returns, and the checks writers run on it."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from facegen.errors import FacegenError
+from facegen.mesh import Mesh
+
+DEFAULT_FPS = 25.0  # the frame rate of a file that states none (BIWI's)
 
 
 @dataclass
 class Animation:
     """A face mesh animation with its audio.
 
-    vertices: [T, V, 3] float32 positions (template + offsets), one per frame at `fps`.
+    vertices: [T, V, 3] float32 positions (template + offsets), one per frame at `fps`; a [T, V, 3] array or
+              a FrameStream (inference.py) that computes frames block by block (`streamed`).
     faces:    [F, 3] int32 triangle list of the template.
+    template: [V, 3] rest pose; with `faces` and `regions` it is the template Mesh (`mesh`, `from_mesh`).
     audio:    mono float32 samples at `sample_rate` (None when there is none), the clip's sound.
+
+    The template's fields stay flat (rather than one `mesh: Mesh` field) because they are what users,
+    writers and readers of Animation read: `anim.faces`, `anim.template`, `anim.regions`.
     """
 
     vertices: np.ndarray
@@ -24,6 +35,18 @@ class Animation:
     sample_rate: int = 16000
     regions: dict[str, np.ndarray] = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_mesh(cls, mesh: Mesh, vertices: np.ndarray, fps: float, **fields) -> Animation:
+        """The animation of `mesh` (its vertices as float32 rest pose, faces as int32, regions);
+        `fields` are the other fields (audio, sample_rate, metadata)."""
+        return cls(vertices=vertices, faces=np.asarray(mesh.faces, dtype=np.int32), fps=fps,
+                   template=np.asarray(mesh.vertices, dtype=np.float32), regions=dict(mesh.regions), **fields)
+
+    @property
+    def mesh(self) -> Mesh:
+        """The template as a Mesh (rest pose, faces, regions)."""
+        return Mesh(self.template, self.faces, self.regions)
 
     @property
     def num_frames(self) -> int:
@@ -40,4 +63,45 @@ class Animation:
     @property
     def size(self) -> float:
         """Bounding-box diagonal of the template: the unit for relative tolerances."""
-        return float(np.linalg.norm(self.template.max(0) - self.template.min(0)))
+        return self.mesh.size
+
+    @property
+    def streamed(self) -> bool:
+        """True when `vertices` is a FrameStream: frames are computed on demand, never all held at once."""
+        return hasattr(self.vertices, "blocks")
+
+    def frame_blocks(self, block_frames: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+        """(first frame, [n, V, 3] float32 frames) for consecutive blocks, for arrays and streams alike: a
+        FrameStream computes one block at a time (`block_frames`, default its own), an array is one block
+        (or blocks of `block_frames`)."""
+        if self.streamed:
+            yield from self.vertices.blocks(block_frames)
+            return
+        frames = np.ascontiguousarray(self.vertices, dtype=np.float32)
+        step = block_frames or max(len(frames), 1)
+        for start in range(0, len(frames), step):
+            yield start, frames[start : start + step]
+
+
+def check_animation(anim: Animation) -> None:
+    """Refuse an Animation no writer can store: wrong shapes, no frames, bad fps, faces out of range."""
+    vertices = anim.vertices if anim.streamed else np.asarray(anim.vertices)  # a FrameStream stays lazy
+    faces = np.asarray(anim.faces)
+    if len(vertices.shape) != 3 or vertices.shape[2] != 3 or vertices.shape[0] == 0 or vertices.shape[1] == 0:
+        raise FacegenError(f"animation vertices must be [T, V, 3] with T, V > 0, got {list(vertices.shape)}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.shape[0] == 0:
+        raise FacegenError(f"animation faces must be [F, 3] triangles, got {list(faces.shape)}")
+    if faces.min() < 0 or faces.max() >= vertices.shape[1]:
+        raise FacegenError(f"animation faces index vertices outside 0..{vertices.shape[1] - 1}")
+    if np.asarray(anim.template).shape != vertices.shape[1:]:
+        raise FacegenError(
+            f"animation template is {list(np.shape(anim.template))}, frames are {list(vertices.shape[1:])}"
+        )
+    if not (np.isfinite(anim.fps) and anim.fps > 0):
+        raise FacegenError(f"animation fps must be a positive number, got {anim.fps}")
+    if anim.audio is not None and np.asarray(anim.audio).ndim != 1:
+        raise FacegenError(f"animation audio must be mono (1-D), got shape {list(np.shape(anim.audio))}")
+    if anim.audio is not None and not (
+        isinstance(anim.sample_rate, int | np.integer) and anim.sample_rate > 0
+    ):
+        raise FacegenError(f"animation sample rate must be a positive integer, got {anim.sample_rate!r}")

@@ -14,6 +14,7 @@ import click
 
 from facegen import __version__
 from facegen.errors import FacegenError
+from facegen.exchange import extensions
 
 
 def _progress(quiet: bool):
@@ -29,6 +30,12 @@ def _read_text(text: str | None, text_file: str | None) -> str | None:
         return Path(text_file).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise FacegenError(f"cannot read transcript file {text_file} ({exc}): pass a UTF-8 text file") from exc
+
+
+def _morph_targets(_ctx, _param, value: str | None) -> int | str | None:
+    from facegen.exchange.pca import parse_morph_targets
+
+    return parse_morph_targets(value)
 
 
 def _one_of(**options) -> None:
@@ -58,10 +65,10 @@ def cli(debug: bool) -> None:
               help="A face mesh (PLY/OBJ) with the model's topology to animate instead of its template.")
 @click.option("--text-model", help="Local folder (or cached id) of the text model, if not where the bundle says.")
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
-              help="Output file: .usda .usdc .usd .usdz .glb .gltf .npy.")
+              help=f"Output file: {' '.join(extensions())}.")
 @click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
               help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
-@click.option("--morph-targets", metavar="K|all",
+@click.option("--morph-targets", metavar="K|all", callback=_morph_targets,
               help="glTF / USD blendshapes: number of PCA morph targets (default: as many as the tolerance "
                    "needs), or 'all' for one per frame (short clips).")
 @click.option("--tolerance", type=float,
@@ -75,7 +82,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
             morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
-    from facegen.exchange import check_write_options, format_module, write_animation
+    from facegen.exchange import check_write_options, format_module, format_of, write_animation
     from facegen.pipeline import animate as run
 
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
@@ -90,8 +97,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         check_output(preview)
     progress = _progress(quiet)
     # writers that read frames block by block: no [T, V, 3] array in memory
-    stream = Path(output).suffix.lower() in (".npy", ".usda", ".usdc", ".usd") and usd_mode != "blendshapes" \
-        and not preview
+    stream = format_of(output).streams_with(options) and not preview
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
                bundle=model, template=template, text_model=text_model, device=device, stream=stream,
                progress=progress, warn=_progress(False))

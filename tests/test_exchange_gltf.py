@@ -105,11 +105,11 @@ def test_all_targets_refused_for_a_long_clip_and_k_suggested():
 
 
 def test_parse_morph_targets():
-    assert gltf.parse_morph_targets(None) is None and gltf.parse_morph_targets("ALL") == "all"
-    assert gltf.parse_morph_targets("12") == 12
-    for bad in ("abc", "0", "-3", "2.5"):
+    assert pca.parse_morph_targets(None) is None and pca.parse_morph_targets("ALL") == "all"
+    assert pca.parse_morph_targets("12") == 12 and pca.parse_morph_targets(np.int64(3)) == 3
+    for bad in ("abc", "0", "-3", "2.5", 2.5, True):
         with pytest.raises(FacegenError, match="morph-targets"):
-            gltf.parse_morph_targets(bad)
+            pca.parse_morph_targets(bad)
 
 
 # ---- the writer ------------------------------------------------------------------------------------------
@@ -266,7 +266,7 @@ def test_validate_without_node_says_how_to_install(clip, tmp_path, monkeypatch):
 def test_validator_script_without_the_package(tmp_path):
     if not shutil.which("node"):
         pytest.skip("node is not installed")
-    from facegen.validate_gltf import SCRIPT, run_gltf_validator
+    from facegen.validate.gltf import SCRIPT, run_gltf_validator
 
     lonely = tmp_path / "gltf_validate.js"
     shutil.copy(SCRIPT, lonely)

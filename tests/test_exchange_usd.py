@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import importlib
+import inspect
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -14,7 +18,8 @@ from pxr import Sdf, Usd, UsdGeom, UsdMedia
 from facegen import __version__
 from facegen.animation import Animation
 from facegen.errors import FacegenError
-from facegen.exchange import extensions, read_animation, write_animation
+from facegen.exchange import extensions, format_of, read_animation, write_animation
+from facegen.exchange.formats import COMMON_OPTIONS, FORMATS
 from facegen.exchange.usd import DEFAULT_METERS_PER_UNIT
 from facegen.mesh import Mesh
 
@@ -126,6 +131,57 @@ def test_npy_layout_and_round_trip(tmp_path, grid_mesh):
     small = Mesh(grid_mesh.vertices[:10], grid_mesh.faces[:2])
     with pytest.raises(FacegenError, match="has 10"):
         read_animation(tmp_path / "b.npy", template=small)
+
+
+class Blocks:
+    """A stand-in for inference.FrameStream: frames only through blocks(n), never as one array."""
+
+    def __init__(self, frames: np.ndarray) -> None:
+        self.frames, self.shape, self.calls = frames, frames.shape, []
+
+    def blocks(self, block_frames=None):
+        self.calls.append(block_frames)
+        for start in range(0, len(self.frames), block_frames or 7):
+            yield start, self.frames[start : start + (block_frames or 7)].copy()
+
+
+@pytest.mark.parametrize("ext", [".npy", ".usdc"])
+def test_streamed_frames_are_written_block_by_block(tmp_path, grid_mesh, ext):
+    anim = make_animation(grid_mesh, frames=30)
+    stream = Blocks(anim.vertices)
+    streamed = Animation(stream, anim.faces, anim.fps, anim.template, anim.audio, anim.sample_rate)
+    assert streamed.streamed and not anim.streamed and format_of(tmp_path / f"a{ext}").streams_with({})
+    write_animation(anim, tmp_path / f"a{ext}", write_audio=False)
+    write_animation(streamed, tmp_path / f"b{ext}", write_audio=False)
+    assert stream.calls == [None]
+    if ext == ".npy":  # the header np.save writes, then the blocks: the same bytes
+        assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
+        buffer = tmp_path / "c.npy"
+        np.save(buffer, anim.vertices.reshape(30, -1), allow_pickle=False)
+        assert buffer.read_bytes() == (tmp_path / "a.npy").read_bytes()
+    else:
+        np.testing.assert_array_equal(read_animation(tmp_path / "b.usdc").vertices, anim.vertices)
+    assert [s for s, _ in streamed.frame_blocks(8)] == [s for s, _ in anim.frame_blocks(8)] == [0, 8, 16, 24]
+
+
+def test_format_table():
+    assert extensions() == [ext for f in FORMATS for ext in f.extensions]
+    assert len(set(extensions())) == len(extensions())
+    for fmt in FORMATS:
+        module = importlib.import_module(fmt.module)
+        keywords = [n for n, p in inspect.signature(module.write).parameters.items() if p.kind is p.KEYWORD_ONLY]
+        assert sorted(keywords) == sorted(fmt.options + COMMON_OPTIONS), fmt.name
+        assert callable(importlib.import_module(fmt.validator).check)
+    assert format_of("x.usdc").streams_with({"mode": "points"})
+    assert not format_of("x.usdc").streams_with({"mode": "blendshapes"})
+    assert not format_of("x.GLB").streams_with({}) and not format_of("x.usdz").streams_with({})
+
+
+def test_the_table_imports_no_format_module():
+    code = ("import sys, facegen.cli, facegen.exchange\n"
+            "print(sorted(m for m in ('numpy', 'pxr', 'pygltflib') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
 
 
 def test_no_audio_no_sidecar(tmp_path, grid_mesh):

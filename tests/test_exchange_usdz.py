@@ -9,7 +9,7 @@ import zipfile
 import numpy as np
 import pytest
 import soundfile as sf
-from helpers import FPS, SR, _Boom, make_animation, max_distance, rich_animation, usdskel_points
+from helpers import FPS, SR, Boom, make_animation, max_distance, rich_animation, usdskel_points
 from pxr import Ar, Sdf, Usd, UsdGeom, UsdMedia, UsdValidation
 
 from facegen.errors import FacegenError
@@ -125,7 +125,7 @@ def test_input_audio_beside_the_package_is_untouched(tmp_path, grid_mesh):
 @pytest.mark.parametrize("exc", [RuntimeError("disk on fire"), KeyboardInterrupt()])
 def test_failed_write_leaves_nothing(tmp_path, grid_mesh, exc):
     anim = make_animation(grid_mesh, frames=10)
-    anim.metadata = {_Boom(exc): 1}
+    anim.metadata = {Boom(exc): 1}
     with pytest.raises(type(exc)):
         write_animation(anim, tmp_path / "out.usdz")
     assert list(tmp_path.iterdir()) == []  # no package, no staging folder

@@ -1,4 +1,4 @@
-"""Animation files: one module per format, chosen by the file's extension.
+"""Animation files: one module per format, chosen by the file's extension through the format table.
 
 Each format module defines
     write(anim, path, *, write_audio=True, audio_source=None, **format_options) -> list[Path]
@@ -6,62 +6,53 @@ Each format module defines
         the input audio file, which must never be overwritten by a sidecar)
 and, when the format can be read back,
     read(path, template=None, fps=None) -> Animation
-A new format is one new module plus its extensions in FORMATS.
+Its extensions, options, streaming and validator are its row in exchange/formats.py. Importing this
+package imports no format module (nor numpy): `facegen --help` reads the table.
 """
 
 from __future__ import annotations
 
 import importlib
-import inspect
 import os
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from facegen.animation import Animation
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.exchange.formats import COMMON_OPTIONS, FORMATS, Format
 
-FORMATS: dict[str, str] = {
-    ".usda": "facegen.exchange.usd",
-    ".usdc": "facegen.exchange.usd",
-    ".usd": "facegen.exchange.usd",
-    ".npy": "facegen.exchange.npy",
-    ".glb": "facegen.exchange.gltf",
-    ".gltf": "facegen.exchange.gltf",
-    ".usdz": "facegen.exchange.usdz",
-}
-
-
-def extensions() -> list[str]:
-    """The file extensions facegen writes, in table order."""
-    return list(FORMATS)
-
-
-def format_module(path: str | os.PathLike) -> ModuleType:
-    """The module that handles `path`'s extension; an unknown extension is a FacegenError."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in FORMATS:
-        raise FacegenError(
-            f"cannot handle {Path(path).name!r}: unknown extension {suffix or '(none)'!r}; "
-            f"use one of {', '.join(FORMATS)}"
-        )
-    return importlib.import_module(FORMATS[suffix])
-
+if TYPE_CHECKING:
+    from facegen.animation import Animation
+    from facegen.mesh import Mesh
 
 OPTION_FLAGS = {"mode": "--usd-mode", "morph_targets": "--morph-targets", "tolerance": "--tolerance"}
 
 
+def extensions() -> list[str]:
+    """The file extensions facegen writes, in table order."""
+    return [ext for fmt in FORMATS for ext in fmt.extensions]
+
+
+def format_of(path: str | os.PathLike) -> Format:
+    """The table row for `path`'s extension; an unknown extension is a FacegenError."""
+    suffix = Path(path).suffix.lower()
+    for fmt in FORMATS:
+        if suffix in fmt.extensions:
+            return fmt
+    raise FacegenError(
+        f"cannot handle {Path(path).name!r}: unknown extension {suffix or '(none)'!r}; "
+        f"use one of {', '.join(extensions())}"
+    )
+
+
+def format_module(path: str | os.PathLike) -> ModuleType:
+    """The module that handles `path`'s extension; an unknown extension is a FacegenError."""
+    return importlib.import_module(format_of(path).module)
+
+
 def check_write_options(path: str | os.PathLike, options: dict) -> None:
     """Refuse options the format of `path` does not take (before any work is done)."""
-    module = format_module(path)
-    accepted = [
-        name
-        for name, p in inspect.signature(module.write).parameters.items()
-        if p.kind is inspect.Parameter.KEYWORD_ONLY
-    ]
-    unknown = sorted(set(options) - set(accepted))
+    unknown = sorted(set(options) - set(format_of(path).options + COMMON_OPTIONS))
     if unknown:
         names = ", ".join(OPTION_FLAGS.get(k, k) for k in unknown)
         raise FacegenError(
@@ -76,8 +67,7 @@ def write_animation(anim: Animation, path: str | os.PathLike, **options) -> list
     an option the format does not take is a FacegenError.
     """
     check_write_options(path, options)
-    module = format_module(path)
-    return module.write(anim, path, **options)
+    return format_module(path).write(anim, path, **options)
 
 
 def read_animation(
@@ -88,27 +78,3 @@ def read_animation(
     if not hasattr(module, "read"):
         raise FacegenError(f"facegen writes {Path(path).suffix} files but cannot read them back")
     return module.read(path, template=template, fps=fps)
-
-
-def check_animation(anim: Animation) -> None:
-    """Refuse an Animation no writer can store: wrong shapes, no frames, bad fps, faces out of range."""
-    vertices = anim.vertices if hasattr(anim.vertices, "blocks") else np.asarray(anim.vertices)  # FrameStream: lazy
-    faces = np.asarray(anim.faces)
-    if len(vertices.shape) != 3 or vertices.shape[2] != 3 or vertices.shape[0] == 0 or vertices.shape[1] == 0:
-        raise FacegenError(f"animation vertices must be [T, V, 3] with T, V > 0, got {list(vertices.shape)}")
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.shape[0] == 0:
-        raise FacegenError(f"animation faces must be [F, 3] triangles, got {list(faces.shape)}")
-    if faces.min() < 0 or faces.max() >= vertices.shape[1]:
-        raise FacegenError(f"animation faces index vertices outside 0..{vertices.shape[1] - 1}")
-    if np.asarray(anim.template).shape != vertices.shape[1:]:
-        raise FacegenError(
-            f"animation template is {list(np.shape(anim.template))}, frames are {list(vertices.shape[1:])}"
-        )
-    if not (np.isfinite(anim.fps) and anim.fps > 0):
-        raise FacegenError(f"animation fps must be a positive number, got {anim.fps}")
-    if anim.audio is not None and np.asarray(anim.audio).ndim != 1:
-        raise FacegenError(f"animation audio must be mono (1-D), got shape {list(np.shape(anim.audio))}")
-    if anim.audio is not None and not (
-        isinstance(anim.sample_rate, int | np.integer) and anim.sample_rate > 0
-    ):
-        raise FacegenError(f"animation sample rate must be a positive integer, got {anim.sample_rate!r}")

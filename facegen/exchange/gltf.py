@@ -31,43 +31,28 @@ from __future__ import annotations
 
 import json
 import os
-import struct
 from pathlib import Path
 
 import numpy as np
 
 from facegen import __version__
-from facegen.animation import Animation
+from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.atomic import atomic_path
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
+from facegen.exchange.formats import by_module
 from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, morph_basis
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
-from facegen.mesh import Mesh, check_topology
+from facegen.mesh import Mesh, check_topology, vertex_normals
 
-EXTENSIONS = (".glb", ".gltf")
+FORMAT = by_module(__name__)
 DEFAULT_METERS_PER_UNIT = 0.2
 AUDIO_EXTENSION = "KHR_audio_emitter"
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 FLOAT, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5123, 5125
 _DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
-
-
-def parse_morph_targets(value: str | int | None) -> int | str | None:
-    """The `--morph-targets` value: None/"" (choose K from the tolerance), "all", or a whole number >= 1."""
-    if value is None or value == "":
-        return None
-    if isinstance(value, str) and value.strip().lower() == "all":
-        return "all"
-    try:
-        k = int(value)
-    except (TypeError, ValueError):
-        raise FacegenError(f"--morph-targets takes a number of targets or 'all', got {value!r}") from None
-    if k < 1:
-        raise FacegenError(f"--morph-targets must be at least 1, got {k}")
-    return k
 
 
 def write(
@@ -86,17 +71,15 @@ def write(
     number, or "all". `audio_source`: the input audio file, kept (not overwritten) when it is the sidecar.
     Returns the files written: the glTF file, then the .bin (for .gltf), then the WAV (with audio).
     """
-    from facegen.exchange import check_animation
-
     check_animation(anim)
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in EXTENSIONS:
-        raise FacegenError(f"{path} is not a glTF file name: use .glb or .gltf")
+    if suffix not in FORMAT.extensions:
+        raise FacegenError(f"{path} is not a glTF file name: use one of {', '.join(FORMAT.extensions)}")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
     tolerance = DEFAULT_TOLERANCE if tolerance is None else float(tolerance)
-    basis = morph_basis(anim, parse_morph_targets(morph_targets), tolerance, unit_weights=True, sparse=True)
+    basis = morph_basis(anim, morph_targets, tolerance, unit_weights=True, sparse=True)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     sound = mp3.encode(audio, anim.sample_rate) if audio is not None else None
     bin_path = path.with_suffix(".bin")
@@ -105,7 +88,8 @@ def write(
     try:
         with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
             if suffix == ".glb":
-                _save_glb(gltf, blob, tmp)
+                gltf.set_binary_blob(blob)
+                gltf.save_binary(str(tmp))
             else:
                 gltf.buffers[0].uri = bin_path.name
                 tmp.write_text(gltf.to_json(separators=(",", ":")))
@@ -244,34 +228,6 @@ class _Blob:
     def data(self) -> bytes:
         pad = (-self.length) % 4
         return b"".join(self.parts) + b"\0" * pad
-
-
-def _save_glb(gltf, blob: bytes, path: Path) -> None:
-    """GLB container: header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
-    text = gltf.to_json(separators=(",", ":")).encode()
-    text += b" " * ((-len(text)) % 4)
-    total = 12 + 8 + len(text) + 8 + len(blob)
-    with open(path, "wb") as f:
-        f.write(struct.pack("<III", 0x46546C67, 2, total))
-        f.write(struct.pack("<II", len(text), 0x4E4F534A))
-        f.write(text)
-        f.write(struct.pack("<II", len(blob), 0x004E4942))
-        f.write(blob)
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (+Z for a vertex in no or only degenerate triangles)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    face_normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    normals = np.zeros_like(v)
-    for corner in range(3):
-        np.add.at(normals, f[:, corner], face_normals)
-    length = np.linalg.norm(normals, axis=1)
-    bad = length < 1e-20
-    normals[bad] = (0.0, 0.0, 1.0)
-    length[bad] = 1.0
-    return (normals / length[:, None]).astype(np.float32)
 
 
 def _jsonable(values: dict) -> dict:
@@ -465,13 +421,13 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     file_fps = decoded["fps"]
     if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-3:
         raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")
-    rate = float(file_fps if file_fps is not None else fps if fps is not None else 25.0)
+    rate = float(file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS)
     faces = decoded["faces"]
     if template is not None:
         check_topology(Mesh(vertices[0], faces), template.num_vertices, template.faces, f"{path}")
-        rest = np.asarray(template.vertices, dtype=np.float32)
+        face = Mesh(template.vertices, faces, template.regions)
     else:
-        rest = decoded["base"]
+        face = Mesh(decoded["base"], faces)
     audio, sample_rate = None, 16000
     wav = sidecar_path(path)
     if wav.is_file():
@@ -481,13 +437,5 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
         if data is not None:
             audio, sample_rate = mp3.decode(data)
     metadata = decoded["info"].get("metadata", {})
-    return Animation(
-        vertices=vertices,
-        faces=faces,
-        fps=rate,
-        template=rest,
-        audio=audio,
-        sample_rate=sample_rate,
-        regions=dict(template.regions) if template is not None else {},
-        metadata=metadata if isinstance(metadata, dict) else {},
-    )
+    return Animation.from_mesh(face, vertices, rate, audio=audio, sample_rate=sample_rate,
+                               metadata=metadata if isinstance(metadata, dict) else {})

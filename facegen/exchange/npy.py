@@ -11,14 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from facegen.animation import Animation
+from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
 from facegen.mesh import Mesh
-
-EXTENSIONS = (".npy",)
-DEFAULT_FPS = 25.0
 
 
 def write(
@@ -32,19 +29,13 @@ def write(
 
     `audio_source` is the input audio file: when it is the sidecar itself it is kept, not overwritten.
     """
-    from facegen.exchange import check_animation
-
     check_animation(anim)
     path = Path(path)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav), open(tmp, "wb") as f:
-        if hasattr(anim.vertices, "blocks"):  # a FrameStream (long clips): written block by block
-            shape = (anim.num_frames, 3 * anim.num_vertices)
-            np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": shape})
-            f.writelines(np.ascontiguousarray(block, dtype="<f4").data for _, block in anim.vertices.blocks())
-        else:
-            flat = np.ascontiguousarray(anim.vertices, dtype=np.float32).reshape(anim.num_frames, -1)
-            np.save(f, flat, allow_pickle=False)
+        shape = (anim.num_frames, 3 * anim.num_vertices)  # the header np.save writes, then the frames
+        np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": shape})
+        f.writelines(np.ascontiguousarray(block, dtype="<f4").data for _, block in anim.frame_blocks())
     return [path] if wav is None else [path, wav]
 
 
@@ -81,12 +72,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     wav = sidecar_path(path)
     if wav.is_file():
         audio, sample_rate = load_audio(wav)
-    return Animation(
-        vertices=data.reshape(len(data), num_vertices, 3).astype(np.float32),
-        faces=np.asarray(template.faces, dtype=np.int32),
-        fps=float(fps if fps is not None else DEFAULT_FPS),
-        template=np.asarray(template.vertices, dtype=np.float32),
-        audio=audio,
-        sample_rate=sample_rate,
-        regions=dict(template.regions),
+    return Animation.from_mesh(
+        template, data.reshape(len(data), num_vertices, 3).astype(np.float32),
+        float(fps if fps is not None else DEFAULT_FPS), audio=audio, sample_rate=sample_rate,
     )

@@ -60,6 +60,27 @@ class MorphBasis:
         return flat.reshape(len(self.weights), -1, 3).astype(np.float32, copy=False)
 
 
+def parse_morph_targets(value: int | str | None) -> int | str | None:
+    """The number of morph targets as given (`--morph-targets`, the `morph_targets` write option): None or
+    "" (the fewest within the tolerance), "all" (one per frame) or a whole number >= 1 (int or digits)."""
+    if value is None or value == "":
+        return None
+    if isinstance(value, str):
+        text = value.strip()
+        if text.lower() == "all":
+            return "all"
+        k = int(text) if text.lstrip("-").isdigit() else None
+    elif isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool):
+        k = int(value) if float(value).is_integer() else None
+    else:
+        k = None
+    if k is None:
+        raise FacegenError(f"--morph-targets takes a number of targets or 'all', got {value!r}")
+    if k < 1:
+        raise FacegenError(f"--morph-targets must be a whole number >= 1, got {k}")
+    return k
+
+
 def morph_basis(
     anim: Animation,
     k: int | str | None = None,
@@ -78,12 +99,9 @@ def morph_basis(
     """
     frames, template = _frames(anim)
     size = float(anim.size)
-    if isinstance(k, str):
-        if k.strip().lower() != "all":
-            raise FacegenError(f"morph targets must be a number or 'all', got {k!r}")
+    k = parse_morph_targets(k)
+    if k == "all":
         return frame_basis(anim, tolerance=tolerance, sparse=sparse)
-    if k is not None and (int(k) != k or k < 1):
-        raise FacegenError(f"the number of morph targets must be a whole number >= 1, got {k}")
     if not tolerance > 0:
         raise FacegenError(f"the morph target tolerance must be positive, got {tolerance}")
     T = frames.shape[0]

@@ -34,14 +34,15 @@ from pathlib import Path
 import numpy as np
 
 from facegen import __version__
-from facegen.animation import Animation
+from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_skel
+from facegen.exchange.formats import by_module
 from facegen.exchange.wav import atomic_with_sidecar
 from facegen.mesh import Mesh, check_topology
 
-EXTENSIONS = (".usda", ".usdc", ".usd")
+FORMAT = by_module(__name__)
 MODES = ("points", "blendshapes")
 DEFAULT_METERS_PER_UNIT = 0.2
 ROOT_PATH = "/Face"
@@ -71,12 +72,10 @@ def write(
     """
     from pxr import Sdf, Usd
 
-    from facegen.exchange import check_animation
-
     check_animation(anim)
     path = Path(path)
-    if path.suffix.lower() not in EXTENSIONS:
-        raise FacegenError(f"{path} is not a USD file name: use .usda, .usdc or .usd")
+    if path.suffix.lower() not in FORMAT.extensions:
+        raise FacegenError(f"{path} is not a USD file name: use one of {', '.join(FORMAT.extensions)}")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
     basis = _check_mode(anim, mode, morph_targets, tolerance)
@@ -179,12 +178,8 @@ def _author_samples(layer, anim: Animation) -> None:
 
     points = Sdf.Path(MESH_PATH).AppendProperty("points")
     extent = Sdf.Path(MESH_PATH).AppendProperty("extent")
-    if hasattr(anim.vertices, "blocks"):  # a FrameStream: never more than one block besides the layer
-        blocks = anim.vertices.blocks()
-    else:
-        blocks = [(0, np.ascontiguousarray(anim.vertices, dtype=np.float32))]
     with Sdf.ChangeBlock():
-        for start, block in blocks:
+        for start, block in anim.frame_blocks():  # a FrameStream: never more than one block besides the layer
             for i in range(len(block)):
                 frame = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(block[i], dtype=np.float32))
                 layer.SetTimeSample(points, float(start + i), frame)
@@ -386,14 +381,13 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     file_fps = stage_fps(stage)
     if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-6:
         raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")
-    rate = float(file_fps if file_fps is not None else fps if fps is not None else 25.0)
+    rate = float(file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS)
     if template is not None:
         check_topology(Mesh(vertices[0], faces), template.num_vertices, template.faces, f"{path}")
-        rest = template.vertices
+        face = Mesh(template.vertices, faces, template.regions)
     else:
         rest = rest_points(mesh)
-        if rest is None or rest.shape != vertices.shape[1:]:
-            rest = vertices[0]
+        face = Mesh(vertices[0] if rest is None or rest.shape != vertices.shape[1:] else rest, faces)
     audio, sample_rate = None, 16000
     sound = find_audio(stage)
     if sound is not None:
@@ -403,13 +397,4 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
         audio, sample_rate = read_audio_asset(resolved)
     info = stage.GetRootLayer().customLayerData.get("facegen", {})
     metadata = _python_value(info.get("metadata", {})) if isinstance(info, dict) else {}
-    return Animation(
-        vertices=vertices,
-        faces=faces,
-        fps=rate,
-        template=np.asarray(rest, dtype=np.float32),
-        audio=audio,
-        sample_rate=sample_rate,
-        regions=dict(template.regions) if template is not None else {},
-        metadata=metadata,
-    )
+    return Animation.from_mesh(face, vertices, rate, audio=audio, sample_rate=sample_rate, metadata=metadata)

@@ -48,18 +48,16 @@ def basis_for(anim: Animation, morph_targets: int | str | None, tolerance: float
 
     Vertices that never move in `anim` also get exactly zero offsets in every target and in `rest` (PCA
     leaves float rounding there, and a fixed K has no error budget to drop it), so BlendShapes can leave
-    them out; the error is measured again then. `morph_targets` may be a string ("12", "all": the CLI's).
+    them out; the error is measured again then. `morph_targets` as pca.parse_morph_targets takes it.
     """
-    if isinstance(morph_targets, str) and morph_targets.strip().isdigit():
-        morph_targets = int(morph_targets)
     basis = morph_basis(
         anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance),
         unit_weights=True, sparse=True,
     )
-    vertices = np.asarray(anim.vertices, dtype=np.float32)
-    moving = np.zeros(vertices.shape[1], bool)
-    for start in range(0, len(vertices), 256):  # in blocks: a [T, V, 3] boolean is large for long clips
-        moving |= np.any(vertices[start : start + 256] != np.asarray(anim.template, np.float32), axis=(0, 2))
+    moving = np.zeros(anim.num_vertices, bool)
+    template = np.asarray(anim.template, np.float32)
+    for _, block in anim.frame_blocks(256):  # in blocks: a [T, V, 3] boolean is large for long clips
+        moving |= np.any(block != template, axis=(0, 2))
     if moving.all():
         return basis
     basis = replace(basis, targets=basis.targets * moving[None, :, None], rest=basis.rest * moving[:, None])

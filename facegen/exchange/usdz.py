@@ -21,9 +21,10 @@ from facegen.animation import Animation
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.exchange import usd
+from facegen.exchange.formats import by_module
 from facegen.mesh import Mesh
 
-EXTENSIONS = (".usdz",)
+FORMAT = by_module(__name__)
 
 
 def write(
@@ -46,8 +47,8 @@ def write(
 
     del audio_source  # the audio goes inside the package; no file beside it can be overwritten
     path = Path(path)
-    if path.suffix.lower() not in EXTENSIONS:
-        raise FacegenError(f"{path} is not a USDZ file name: use .usdz")
+    if path.suffix.lower() not in FORMAT.extensions:
+        raise FacegenError(f"{path} is not a USDZ file name: use {', '.join(FORMAT.extensions)}")
     folder = path.parent if str(path.parent) else Path(".")
     with atomic_path(path) as tmp, tempfile.TemporaryDirectory(prefix=f".{path.stem}.", dir=folder) as work:
         stage_file = Path(work) / f"{path.stem}.usdc"

@@ -85,8 +85,6 @@ def render_animation(
     (default: the clip's largest error). Frame counts that differ by a few frames use the shorter clip
     (a note in the result); a topology mismatch is a FacegenError.
     """
-    from facegen.exchange import check_animation
-
     start = time.perf_counter()
     path = check_output(path)
     check_animation(anim)

@@ -1,11 +1,11 @@
-"""Checks on glTF/GLB animations (`facegen validate out.glb`), in the Report of facegen.validate.
+"""Checks on glTF/GLB animations (exchange/gltf.py), added to a Report, and the Khronos validator's driver.
 
   file              the file parses as glTF with one animated morph-target mesh (exchange/gltf.py layout)
   gltf-validator    the Khronos glTF-Validator (npm `gltf-validator`, run by facegen/assets/gltf_validate.js
                     with Node): zero errors; each warning is a `gltf:<CODE>` warning, infos are counted.
                     Without Node or the package this one check fails and says how to install it
                     (`make node-deps`); every other check still runs
-  vertex count, faces, finite, displacement   as for USD, on the reconstructed frames
+  vertex count, faces, finite, displacement   as for USD (checks.py), on the reconstructed frames
   frame rate        asset.extras.facegen.fps is stated (and equals `fps` when given)
   time samples      a LINEAR weights sampler keyed at exactly i / fps, i = 0..T-1, T = the stated frame
                     count; min/max on the sampler input and on every POSITION accessor (base and targets)
@@ -28,13 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
+from facegen.animation import DEFAULT_FPS, Animation
 from facegen.errors import FacegenError
 from facegen.exchange import gltf as gltf_format
-from facegen.exchange import mp3
+from facegen.exchange import mp3, read_animation
 from facegen.exchange.wav import sidecar_path
 from facegen.mesh import Mesh
+from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
+from facegen.validate.report import Expected, Report
 
-ASSETS = Path(__file__).resolve().parent / "assets"
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
 SCRIPT = ASSETS / "gltf_validate.js"
 INSTALL_HINT = "run `make node-deps` in the facegen checkout (npm install in facegen/assets)"
 
@@ -74,17 +77,11 @@ def run_gltf_validator(path: str | os.PathLike, *, script: str | os.PathLike | N
     return report, ""
 
 
-def validate_gltf(
-    report, path: Path, template: Mesh | None, fps: float | None, audio_path, require_audio: bool,
-    max_displacement: float, reference=None,
-) -> None:
-    """Add the glTF checks for `path` to `report` (a facegen.validate.Report). Never raises for a bad file."""
-    from facegen.validate import DEFAULT_FPS, _check_duration, _check_faces, _check_values, _read_audio
-
-    try:
-        decoded = gltf_format.decode(path)
-    except FacegenError as exc:
-        report.add("file", False, str(exc))
+def check(report: Report, path: Path, expected: Expected) -> None:
+    """Add the glTF checks for `path` to `report`; never raises for a bad file."""
+    template, fps, require_audio = expected.template, expected.fps, expected.require_audio
+    decoded = open_file(report, gltf_format.decode, path)
+    if decoded is None:
         _khronos(report, path)
         return
     info = decoded["info"]
@@ -95,11 +92,11 @@ def validate_gltf(
 
     frames = gltf_format.reconstruct(decoded)
     base = decoded["base"]
-    expected = template.num_vertices if template is not None else len(base)
+    count = template.num_vertices if template is not None else len(base)
     source = "the template" if template is not None else "the file's rest pose"
-    report.add("vertex count", len(base) == expected,
-               f"{len(base)} vertices" + ("" if len(base) == expected else f", {source} has {expected}"))
-    _check_faces(report, decoded["faces"], template, len(base))
+    report.add("vertex count", len(base) == count,
+               f"{len(base)} vertices" + ("" if len(base) == count else f", {source} has {count}"))
+    check_faces(report, decoded["faces"], template, len(base))
 
     stated = info.get("fps")
     rate = float(stated) if isinstance(stated, int | float) and stated > 0 else None
@@ -110,13 +107,13 @@ def validate_gltf(
         report.add("frame rate", not off, f"{rate:g} fps" + (f": expected {fps:g} fps" if off else ""))
     rate = rate or decoded["fps"] or fps or DEFAULT_FPS
     _check_keys(report, decoded, rate)
-    _check_values(report, frames if len(base) == expected else [], base, template, max_displacement)
-    _check_reconstruction(report, frames, info, template, rate, reference)
+    check_values(report, frames if len(base) == count else [], base, template, expected.max_displacement)
+    _check_reconstruction(report, frames, info, template, rate, expected.reference)
 
     audio = None
-    wav = Path(audio_path) if audio_path is not None else sidecar_path(path)
+    wav = Path(expected.audio_path) if expected.audio_path is not None else sidecar_path(path)
     if wav.is_file():
-        audio = _read_audio(report, "audio", wav, str(wav))
+        audio = read_audio(report, "audio", wav, str(wav))
     data = decoded["file"].mp3_audio()
     embedded = None
     if data is None:
@@ -132,7 +129,7 @@ def validate_gltf(
     if audio is None and embedded is None and require_audio:
         report.add("audio", False, f"no WAV sidecar {wav} and no embedded audio")
     if audio is not None or embedded is None:
-        _check_duration(report, T, rate, audio, require_audio and embedded is None)
+        check_duration(report, T, rate, audio, require_audio and embedded is None)
     if embedded is not None:
         seconds = len(embedded[0]) / embedded[1]
         slack = 1.0 / rate + 1152.0 / embedded[1]  # one frame, plus one MP3 frame of encoder padding
@@ -143,7 +140,7 @@ def validate_gltf(
             _check_sync(report, embedded, audio, rate)
 
 
-def _khronos(report, path: Path) -> None:
+def _khronos(report: Report, path: Path) -> None:
     result, why = run_gltf_validator(path)
     if result is None:
         report.add("gltf-validator", False, why)
@@ -162,7 +159,7 @@ def _khronos(report, path: Path) -> None:
                        "error" if m["severity"] == 0 else "warning")
 
 
-def _check_keys(report, decoded: dict, rate: float) -> None:
+def _check_keys(report: Report, decoded: dict, rate: float) -> None:
     doc = decoded["file"].doc
     times, info = decoded["times"], decoded["info"]
     T = len(times)
@@ -191,7 +188,7 @@ def _check_keys(report, decoded: dict, rate: float) -> None:
                f"and on {len(positions)} POSITION accessors")
 
 
-def _check_reconstruction(report, frames: np.ndarray, info: dict, template: Mesh | None, rate: float,
+def _check_reconstruction(report: Report, frames: np.ndarray, info: dict, template: Mesh | None, rate: float,
                           reference) -> None:
     tolerance = info.get("tolerance")
     claimed = info.get("reconstructionError")
@@ -202,9 +199,6 @@ def _check_reconstruction(report, frames: np.ndarray, info: dict, template: Mesh
                    stated + (f" (tolerance {tolerance:g})" if isinstance(tolerance, int | float) else "")
                    + "; pass the source animation as reference to verify it")
         return
-    from facegen.animation import Animation
-    from facegen.exchange import read_animation
-
     try:
         source = reference if isinstance(reference, Animation) else read_animation(reference, template, rate)
     except FacegenError as exc:
@@ -224,7 +218,7 @@ def _check_reconstruction(report, frames: np.ndarray, info: dict, template: Mesh
                f"{tolerance if tolerance is None else f'{tolerance:g}'})")
 
 
-def _check_sync(report, embedded: tuple[np.ndarray, int], audio: tuple[np.ndarray, int], rate: float) -> None:
+def _check_sync(report: Report, embedded: tuple[np.ndarray, int], audio: tuple[np.ndarray, int], rate: float) -> None:
     samples, sample_rate = embedded
     wav, wav_rate = audio
     if wav_rate != sample_rate:

@@ -1,0 +1,52 @@
+"""The format table: one row per animation file format, read by `facegen.exchange`, the CLI and `validate`.
+
+A row names the format's module (its `write` and, when the format can be read back, `read`), the file
+extensions it owns, the write options it takes besides the common `write_audio` and `audio_source`, whether
+its writer streams (reads `anim.frame_blocks()`, so a FrameStream is never held whole) and the module of
+`facegen.validate` that checks its files. A new format is one new module plus one row here.
+
+The rows live in this one small module rather than in each format module so that reading the table (the
+CLI's `--help` lists the extensions) imports neither numpy nor pxr/pygltflib; tests/test_exchange_usd.py
+checks each row's options against its module's `write` signature.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+COMMON_OPTIONS = ("write_audio", "audio_source")
+
+
+@dataclass(frozen=True)
+class Format:
+    name: str
+    module: str
+    extensions: tuple[str, ...]
+    options: tuple[str, ...]  # write options besides COMMON_OPTIONS
+    validator: str
+    streams: bool = False  # its writer reads frames block by block
+    whole_clip: tuple[str, str] | None = None  # (option, value) with which the writer needs every frame at once
+
+    def streams_with(self, options: dict) -> bool:
+        """True when writing with `options` reads the frames block by block."""
+        if self.whole_clip is None:
+            return self.streams
+        option, value = self.whole_clip
+        return self.streams and options.get(option) != value
+
+
+FORMATS = (
+    Format("USD", "facegen.exchange.usd", (".usda", ".usdc", ".usd"),
+           ("mode", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.usd",
+           streams=True, whole_clip=("mode", "blendshapes")),  # blendshapes: a PCA over the whole clip
+    Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True),
+    Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"), ("morph_targets", "tolerance", "meters_per_unit"),
+           "facegen.validate.gltf"),
+    Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "morph_targets", "tolerance", "meters_per_unit"),
+           "facegen.validate.usd"),
+)
+
+
+def by_module(module: str) -> Format:
+    """The row of format module `module` (a format module's own row: `by_module(__name__)`)."""
+    return next(f for f in FORMATS if f.module == module)

@@ -1,0 +1,263 @@
+"""Checks on USD and USDZ animations (exchange/usd.py, usdz.py; UsdSkel blend shapes: usd_skel.py), added
+to a Report. pxr's validators' warnings are warnings, their errors are errors; facegen's own checks are
+errors.
+
+  file            the file opens as a USD stage
+  mesh            a UsdGeom.Mesh exists (under the defaultPrim)
+  vertex count    every frame has the template's vertex count (23,370 for BIWI topology); without a
+                  template, the file's own rest pose / first frame sets it
+  faces           as in checks.py
+  frame rate      timeCodesPerSecond authored, equal to framesPerSecond and to `fps` when given
+  time samples    points sampled exactly at 0, 1, ..., T-1, stage start/end 0 and T-1, an extent sample per
+                  frame that contains the frame's points (blendshapes: blendShapeWeights sampled at
+                  0, 1, ..., T-1, one weight per blend shape in each sample)
+  blendshapes     blendshapes files (a mesh bound to UsdSkel blend shapes, no points samples): the frames
+                  are blended from the BlendShape offsets and weights, every other check runs on them; the
+                  skel binding is complete and UsdSkel's own evaluation at the middle frame equals the blend
+  reconstruction  blendshapes: the error facegen stated in customLayerData is within its tolerance
+  package         USDZ: the package's files (the root layer first, its WAV), the audio resolves inside it
+  finite, displacement   as in checks.py
+  audio           the SpatialAudio prim's file resolves relative to the layer, or inside the .usdz, and
+                  reads; `audio_path` replaces it when given ("audio file")
+  audio duration  as in checks.py
+  usd:<validator> pxr's UsdValidation validators (all registered), one check per error or warning
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from facegen.animation import DEFAULT_FPS
+from facegen.errors import FacegenError
+from facegen.exchange import usd as usd_format
+from facegen.exchange import usd_skel
+from facegen.exchange import usdz as usdz_format
+from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
+from facegen.validate.report import Expected, Report
+
+SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend (float32 sums), as a share of the face size
+
+
+def check(report: Report, path: Path, expected: Expected) -> None:
+    """Add the USD (or USDZ) checks for `path` to `report`; never raises for a bad file."""
+    template, fps = expected.template, expected.fps
+    stage = open_file(report, usd_format.open_stage, path)
+    if stage is None:
+        return
+    report.add("file", True, f"opened as a USD stage ({stage.GetRootLayer().GetFileFormat().formatId})")
+    mesh = usd_format.find_mesh(stage)
+    if not report.add(
+        "mesh", mesh is not None, f"{mesh.GetPath()}" if mesh else "no UsdGeom.Mesh in the stage"
+    ):
+        _usd_validators(report, stage)
+        return
+
+    if path.suffix.lower() in usdz_format.FORMAT.extensions:
+        _check_package(report, path, stage)
+    rest = usd_format.rest_points(mesh)
+    blended = not mesh.GetPointsAttr().GetNumTimeSamples() and usd_skel.has_blendshapes(mesh)
+    if blended:
+        times, frames = _blendshape_frames(report, stage, mesh, rest)
+    else:
+        times, frames = usd_format.points_samples(mesh)
+    own = rest if rest is not None else (frames[0] if len(frames) else None)
+    count = template.num_vertices if template is not None else (len(own) if own is not None else None)
+    source = (
+        "the template" if template is not None else "the file's rest pose" if rest is not None else "frame 0"
+    )
+    counts = sorted({len(f) for f in frames})
+    if len(frames) == 0:
+        what = "blend shape frames" if blended else "points time samples"
+        report.add("vertex count", False, f"the mesh has no {what}")
+    else:
+        wrong = [i for i, f in enumerate(frames) if len(f) != count]
+        report.add(
+            "vertex count",
+            not wrong,
+            f"{count} vertices per frame ({source})"
+            if not wrong
+            else f"{len(wrong)} of {len(frames)} frames have {counts} vertices, {source} has {count}",
+        )
+
+    try:
+        faces = usd_format.mesh_faces(mesh)
+    except FacegenError as exc:
+        faces = None
+        report.add("faces", False, str(exc))
+    if faces is not None:
+        check_faces(report, faces, template, count)
+
+    file_fps = usd_format.stage_fps(stage)
+    layer = stage.GetRootLayer()
+    if file_fps is None:
+        report.add("frame rate", False, "timeCodesPerSecond is not authored: the frame rate is unknown")
+    else:
+        problems = []
+        if layer.HasFramesPerSecond() and abs(layer.framesPerSecond - file_fps) > 1e-9:
+            problems.append(f"framesPerSecond {layer.framesPerSecond:g} differs from timeCodesPerSecond")
+        if fps is not None and abs(file_fps - fps) > 1e-9:
+            problems.append(f"expected {fps:g} fps")
+        report.add(
+            "frame rate",
+            not problems,
+            f"{file_fps:g} fps" + (": " + "; ".join(problems) if problems else ""),
+        )
+    rate = file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS
+
+    _check_time_samples(report, stage, mesh, times, "blendShapeWeights" if blended else "points")
+    check_values(report, frames if counts == [count] else [], own, template, expected.max_displacement)
+
+    audio = None
+    sound = usd_format.find_audio(stage)
+    if sound is None:
+        report.add(
+            "audio", not expected.require_audio,
+            "no SpatialAudio prim" + ("" if expected.require_audio else " (not required)"),
+        )
+    else:
+        asset, resolved = usd_format.audio_file(sound)
+        if not resolved:
+            report.add("audio", False, f"{sound.GetPath()} refers to {asset!r}, which does not resolve")
+        else:
+            audio = read_audio(
+                report, "audio", resolved, f"{sound.GetPath()} -> {asset}", usd_format.read_audio_asset
+            )
+    if expected.audio_path is not None:
+        audio = read_audio(report, "audio file", expected.audio_path, str(expected.audio_path))
+    check_duration(report, len(frames), rate, audio, expected.require_audio)
+    _usd_validators(report, stage)
+
+
+def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], np.ndarray | list]:
+    """The frames of a blendshapes file (the "blendshapes" check), then the "reconstruction" check."""
+    try:
+        if rest is None:
+            raise FacegenError(f"mesh {mesh.GetPath()} has blend shapes but no points to apply them to")
+        times, frames = usd_skel.blendshape_frames(stage, mesh, rest)
+        middle = len(times) // 2
+        evaluated = usd_skel.skel_points(stage, mesh, times[middle])
+    except FacegenError as exc:
+        report.add("blendshapes", False, str(exc))
+        return [], []
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    finite = np.isfinite(evaluated).all(1)
+    same = np.array_equal(finite, np.isfinite(frames[middle]).all(1))  # NaN is the "finite" check's failure
+    gap = np.sqrt(((evaluated[finite].astype(np.float64) - frames[middle][finite]) ** 2).sum(1))
+    diff = float(gap.max(initial=0.0))
+    agree = same and diff <= SKEL_AGREEMENT * size
+    report.add(
+        "blendshapes",
+        agree,
+        f"{usd_skel.describe(usd_skel.shape_names(mesh))} x {len(times)} frames; UsdSkel's evaluation at "
+        f"time {times[middle]:g} is {diff:.2g} from the blend" + ("" if agree else " (they disagree)"),
+    )
+    info = stage.GetRootLayer().customLayerData.get("facegen", {})
+    stated = info.get("reconstruction") if isinstance(info, dict) else None
+    if isinstance(stated, dict) and "relative_error" in stated:
+        error, tolerance = float(stated["relative_error"]), stated.get("tolerance")
+        ok = tolerance is None or error <= float(tolerance)
+        units = float(stated.get("max_error", float("nan")))
+        report.add(
+            "reconstruction",
+            ok,
+            f"largest vertex error {units:.3g} = {error:.3g} of the face size"
+            + ("" if tolerance is None else f"; tolerance {float(tolerance):g}")
+            + ("" if ok else " (over the tolerance)"),
+        )
+    return times, frames
+
+
+def _check_package(report: Report, path: Path, stage) -> None:
+    """A .usdz: its files (root layer first), and its audio resolving inside it rather than beside it."""
+    from pxr import Ar
+
+    try:
+        names = usdz_format.contents(path)
+    except FacegenError as exc:
+        report.add("package", False, str(exc))
+        return
+    problems = []
+    if not names or Path(names[0]).suffix.lower() not in usd_format.FORMAT.extensions:
+        problems.append("the first file is not a USD layer")
+    sound = usd_format.find_audio(stage)
+    if sound is not None:
+        asset, resolved = usd_format.audio_file(sound)
+        outer = Ar.SplitPackageRelativePathOuter(resolved)[0] if Ar.IsPackageRelativePath(resolved) else ""
+        if not outer or Path(outer).resolve() != path.resolve():
+            problems.append(f"the audio {asset!r} does not resolve inside the package")
+    detail = f"holds {', '.join(names)}" + ("; " + "; ".join(problems) if problems else "")
+    report.add("package", not problems, detail)
+
+
+def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points") -> None:
+    """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame."""
+    from pxr import UsdGeom
+
+    count = len(times)
+    problems = []
+    if times != [float(i) for i in range(count)]:
+        shown = ", ".join(f"{t:g}" for t in times[:4]) + (", ..." if count > 4 else "")
+        problems.append(f"{what} sampled at {shown} instead of 0, 1, ..., {count - 1}")
+    if count and (stage.GetStartTimeCode() != 0 or stage.GetEndTimeCode() != count - 1):
+        problems.append(
+            f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected 0..{count - 1}"
+        )
+    extent = mesh.GetExtentAttr()
+    if what != "points":  # blend shapes deform the rest pose, whose extent is not sampled
+        pass
+    elif list(extent.GetTimeSamples()) != times:
+        problems.append("extent is not sampled at the same times as points")
+    else:
+        points = mesh.GetPointsAttr()
+        for t in times:
+            want = np.asarray(UsdGeom.PointBased.ComputeExtent(points.Get(t)), dtype=np.float64)
+            have = np.asarray(extent.Get(t), dtype=np.float64)
+            if have.shape != (2, 3) or not np.allclose(have, want, rtol=1e-5, atol=1e-6):
+                problems.append(f"extent at time {t:g} does not bound the points")
+                break
+    report.add(
+        "time samples", not problems, "; ".join(problems) or f"{count} frames, one at each of 0..{count - 1}"
+    )
+
+
+def _usd_validators(report: Report, stage) -> None:
+    from pxr import UsdValidation
+
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    with _quiet_native_stderr():  # pxr also prints its findings (and noise) as warnings on stderr
+        errors = context.Validate(stage)
+    found = 0
+    for error in errors:
+        kind = error.GetType()
+        if kind not in (UsdValidation.ValidationErrorType.Error, UsdValidation.ValidationErrorType.Warn):
+            continue
+        found += 1
+        validator = error.GetValidator()
+        name = validator.GetMetadata().name if validator else error.GetName()
+        severity = "error" if kind == UsdValidation.ValidationErrorType.Error else "warning"
+        report.add(f"usd:{name}", False, error.GetMessage(), severity)
+    if not found:
+        report.add(
+            "usd validators", True, f"{len(registry.GetOrLoadAllValidators())} pxr validators, no findings"
+        )
+
+
+@contextlib.contextmanager
+def _quiet_native_stderr() -> Iterator[None]:
+    """Send file descriptor 2 (where pxr's C++ diagnostics go) to /dev/null for the block."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
