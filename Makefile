@@ -77,7 +77,7 @@ voices:
 	if command -v dpkg >/dev/null 2>&1; then \
 	  for p in $(VOICE_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	elif ! command -v flite >/dev/null 2>&1 || ! command -v festival >/dev/null 2>&1; then \
-	  echo "voices: install flite and festival with the voices $(VOICE_PKGS) (Debian package names)"; fi; \
+	  echo "voices: no dpkg here: install the equivalents of these Debian packages: $(VOICE_PKGS)"; fi; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ]; then \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \

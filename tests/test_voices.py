@@ -4,6 +4,7 @@ timings; rate control; the errors a user meets (engine or voice not installed, u
 from __future__ import annotations
 
 import functools
+import shutil
 
 import numpy as np
 import pytest
@@ -23,8 +24,10 @@ def _installed_ids(engine: str) -> frozenset[str]:
 def _installed(name: str) -> V.Voice:
     voice = V.VOICES[name]
     engine = V.ENGINES[voice.engine]
+    if shutil.which(engine.binary) is None:
+        pytest.skip(f"{engine.name} is not installed (make voices, or: {engine.install})")
     if voice.id not in _installed_ids(voice.engine):
-        pytest.skip(f"{name} is not installed (make voices, or: {engine.install})")
+        pytest.skip(f"{name} is not installed (make voices, or: apt-get install {voice.package})")
     return voice
 
 

@@ -143,7 +143,8 @@ def _read_wav(path: Path, voice: Voice, text: str) -> tuple[np.ndarray, int]:
 
 class Flite(Engine):
     """CMU Flite's built-in voices. `-psdur` prints each segment's end time; word boundaries come from the
-    words Flite says (`-pw`) and each word's phone count (the words said one by one, `-ps`)."""
+    words Flite says (`-pw`) and each word's phone count (the words said one by one, `-ps`). (libflite through
+    ctypes would give both in one call, but in-process and unguarded; three short runs cost ~0.3 s.)"""
 
     name, binary, install = "flite", "flite", "apt-get install flite"
     voices = (
@@ -169,10 +170,18 @@ class Flite(Engine):
         segments = [(p, float(t)) for p, t in re.findall(r"(\S+):([0-9.]+)", out)]
         audio, sr = _read_wav(wav, voice, text)
         phones = _timings(segments, voice.name)
-        said = _run([*base, "-pw", "-t", text, "none"], what, timeout).split()
+        # words and their phone counts through the fast diphone voice (the same tokenizer, lexicon and
+        # post-lexical rules); a count that does not add up leaves the words to forced alignment
+        lexical = [exe, "-voice", "kal16" if "kal16" in _flite_voice_list(exe) else voice.id]
+        said: list[str] = []
+        for w in _run([*lexical, "-pw", "-t", text, "none"], what, timeout).split():
+            if w.startswith("'") and said:  # a clitic ('s, 'll) said alone is spelled out: keep it on its word
+                said[-1] += w
+            else:
+                said.append(w)
         words = None
         if said:
-            one_by_one = _run([*base, "-ps", "-t", " ".join(f"{w}." for w in said), "none"], what, timeout)
+            one_by_one = _run([*lexical, "-ps", "-t", " ".join(f"{w}." for w in said), "none"], what, timeout)
             counts = [len(g.split()) for g in re.split(r"\bpau\b", one_by_one) if g.strip()]
             words = _word_spans(said, counts, phones)
         return Utterance(audio, sr, phones, words, voice.name)
