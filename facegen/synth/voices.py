@@ -83,7 +83,8 @@ def _timings(segments: list[tuple[str, float]], voice: str) -> list[Timing]:
 
 
 class Engine:
-    """One synthesiser: subclasses set the class attributes, `installed_ids` and `_synthesize`."""
+    """One synthesiser: subclasses set the class attributes, `installed_ids` and `_synthesize` (a subprocess
+    engine), or `installed_ids` and `synthesize` (an in-process library such as libespeak-ng)."""
 
     name: str
     binary: str
@@ -103,6 +104,7 @@ class Engine:
         raise NotImplementedError
 
     def synthesize(self, text: str, voice: Voice, rate: float) -> Utterance:
+        """`text` said by `voice` at `rate` (checked by the module's `synthesize`)."""
         exe = self.executable()
         with tempfile.TemporaryDirectory(prefix=f"facegen-{self.name}-") as tmp:
             return self._synthesize(exe, text, voice, rate, Path(tmp))
