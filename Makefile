@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test lint bench clean blender-venv node-deps
+.PHONY: setup demo test lint bench clean blender-venv node-deps voices
 
 setup: $(STAMP)
 
@@ -20,7 +20,7 @@ demo: $(STAMP)
 	$(BIN)/facegen animate examples/excellent_room.wav --text-file examples/excellent_room.txt --speaker 0 -o out/excellent_room.usda
 	$(BIN)/facegen validate out/excellent_room.usda
 
-test: $(STAMP) blender-venv node-deps
+test: $(STAMP) blender-venv node-deps voices
 	$(BIN)/python -m pytest -q tests
 
 lint: $(STAMP)
@@ -66,3 +66,20 @@ $(NODE_STAMP): $(NODE_ASSETS)/package.json
 	cd $(NODE_ASSETS) && if [ -f package-lock.json ]; then npm ci --no-audit --no-fund --loglevel=error; \
 	  else npm install --no-audit --no-fund --loglevel=error; fi
 	touch $@
+
+# Speech synthesisers besides espeak-ng for the voice corpus (facegen/synth/voices.py): Flite (its built-in
+# voices) and Festival with its US English diphone and HTS voices, Debian packages (apt, as root, as the Blender
+# libraries are); the tests skip an engine that is absent.
+VOICE_PKGS := flite festival festlex-cmu festlex-poslex festvox-kallpc16k festvox-kdlpc16k festvox-us-slt-hts
+
+voices:
+	@missing=""; \
+	if command -v dpkg >/dev/null 2>&1; then \
+	  for p in $(VOICE_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	elif ! command -v flite >/dev/null 2>&1 || ! command -v festival >/dev/null 2>&1; then \
+	  echo "voices: no dpkg here: install the equivalents of these Debian packages: $(VOICE_PKGS)"; fi; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
+	  else echo "voices: install these apt packages as root:$$missing"; fi; \
+	fi
