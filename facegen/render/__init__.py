@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facegen.animation import Animation
+from facegen.animation import Animation, check_animation
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh, read_mesh
