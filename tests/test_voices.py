@@ -24,7 +24,7 @@ def _installed_ids(engine: str) -> frozenset[str]:
 def _installed(name: str) -> V.Voice:
     voice = V.VOICES[name]
     engine = V.ENGINES[voice.engine]
-    if shutil.which(engine.binary) is None:
+    if engine.binary and shutil.which(engine.binary) is None:
         pytest.skip(f"{engine.name} is not installed (make voices, or: {engine.install})")
     if voice.id not in _installed_ids(voice.engine):
         pytest.skip(f"{name} is not installed (make voices, or: apt-get install {voice.package})")
@@ -44,11 +44,19 @@ def test_voice_says_a_sentence_with_its_timings(name):
     utt = V.synthesize(SENTENCE, name)
     assert utt.voice == name
     assert utt.audio.dtype == np.float32 and utt.audio.ndim == 1
-    assert utt.sample_rate == {"kal": 8000, "cmu_us_slt_arctic_hts": 32000}.get(voice.id, 16000)
+    native = 22050 if voice.engine == "espeak" else 16000
+    assert utt.sample_rate == {"kal": 8000, "cmu_us_slt_arctic_hts": 32000}.get(voice.id, native)
     assert 0.8 <= utt.duration <= 3.0
     assert np.sqrt(np.mean(utt.audio**2)) > 0.01
 
-    assert [p for p, _, _ in utt.phones] == PHONES  # the engine's own phones, mapped to CMU
+    said = [p for p, _, _ in utt.phones]
+    if utt.alphabet == "espeak":  # espeak's own mnemonics (the rig reads them); the same phones in CMU
+        from facegen.espeak import espeak_to_cmu
+
+        said = espeak_to_cmu(said)
+        assert len(said) == len(PHONES) and sum(a != b for a, b in zip(said, PHONES, strict=True)) <= 1  # accents
+    else:
+        assert said == PHONES  # the engine's own phones, mapped to CMU
     starts, ends = np.array([s for _, s, _ in utt.phones]), np.array([e for _, _, e in utt.phones])
     assert np.all(ends > starts) and np.all(starts[1:] >= ends[:-1] - 1e-6)
     assert 0.0 < starts[0] and ends[-1] <= utt.duration + 1e-3
@@ -61,7 +69,8 @@ def test_voice_says_a_sentence_with_its_timings(name):
     assert [w.lower() for w, _, _ in utt.words] == SENTENCE.lower().split()
     w_starts = [s for _, s, _ in utt.words]
     assert w_starts == sorted(w_starts)
-    assert utt.words[0][1] == pytest.approx(starts[0]) and utt.words[-1][2] == pytest.approx(ends[-1])
+    assert utt.words[-1][2] == pytest.approx(ends[-1], abs=0.03)
+    assert utt.words[0][1] == pytest.approx(starts[0], abs=0.06 if voice.engine == "espeak" else 1e-6)
     assert all(e > s for _, s, e in utt.words)
 
 
@@ -99,7 +108,7 @@ def test_missing_engine_names_the_debian_package(name, package, monkeypatch, tmp
     with pytest.raises(FacegenError, match=package) as err:
         V.synthesize(SENTENCE, name)
     assert "not installed" in str(err.value)
-    assert V.available_voices() == []
+    assert {v.engine for v in V.available_voices()} <= {"espeak"}  # espeak is a library, not a program
 
 
 @pytest.mark.parametrize("engine", ["flite", "festival"])

@@ -1,6 +1,7 @@
-"""Speech synthesisers behind one voice registry: Flite and Festival (Debian packages) voices with stable
-names ("flite:slt", "festival:kal_diphone"), each synthesised to an `Utterance` with the engine's own phone
-and word timings in CMU phones.
+"""Speech synthesisers behind one voice registry: libespeak-ng (in-process, facegen.espeak), Flite and
+Festival (Debian packages) voices with stable names ("espeak:en-us+f3", "flite:slt", "festival:kal_diphone"),
+each synthesised to an `Utterance` with the engine's own phone and word timings (CMU phones; espeak's own
+mnemonics for espeak voices, which the rig reads natively — `Utterance.alphabet` says which).
 
 An engine is one `Engine` subclass (its binary, the Debian packages that install it, its voices and one
 `_synthesize`); adding one (e.g. espeak-ng variants) is one class plus one entry in `ENGINES`. Every engine
@@ -16,6 +17,7 @@ import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -57,6 +59,7 @@ class Utterance:
     phones: list[Timing] | None
     words: list[Timing] | None
     voice: str
+    alphabet: str = "cmu"  # of the phones: "cmu", or "espeak" (espeak-ng mnemonics, stress marks kept)
 
     @property
     def duration(self) -> float:
@@ -265,7 +268,41 @@ def _festival_voice_list(exe: str) -> set[str]:
     return {line.split("\t")[1] for line in out.splitlines() if line.startswith("VOICE\t")}
 
 
-ENGINES: dict[str, Engine] = {e.name: e for e in (Flite(), Festival())}
+class Espeak(Engine):
+    """libespeak-ng in-process (facegen.espeak): English languages x voice variants, each with its own pitch
+    and speaking rate, so the voices differ in timbre, accent, pitch and tempo."""
+
+    name, binary, install = "espeak", "", "pip install espeakng-loader"
+    # (language+variant, gender, pitch 0-100, words per minute)
+    _SETTINGS: ClassVar[dict[str, tuple[str, int, int]]] = {
+        "en-us+f1": ("female", 55, 160), "en+f2": ("female", 50, 150), "en-us+f3": ("female", 45, 165),
+        "en-gb-x-rp+f4": ("female", 60, 150), "en-029+f5": ("female", 48, 155), "en+belinda": ("female", 40, 165),
+        "en-us+steph": ("female", 52, 145), "en-gb-scotland+linda": ("female", 58, 160),
+        "en-us+m1": ("male", 45, 160), "en+m2": ("male", 55, 152), "en-us-nyc+m3": ("male", 50, 168),
+        "en-gb-x-rp+m4": ("male", 40, 146), "en-us+m6": ("male", 60, 158), "en-gb-scotland+m7": ("male", 50, 154),
+        "en-us+klatt": ("male", 50, 160), "en+whisper": ("female", 50, 150),
+    }
+    voices = tuple(Voice("espeak", k, g, "espeakng-loader (PyPI)", f"espeak-ng {k}, pitch {p}, {r} wpm")
+                   for k, (g, p, r) in _SETTINGS.items())
+
+    def installed_ids(self) -> set[str]:
+        try:
+            import espeakng_loader  # noqa: F401
+        except ImportError:
+            return set()
+        return {v.id for v in self.voices}
+
+    def synthesize(self, text: str, voice: Voice, rate: float) -> Utterance:
+        from facegen.espeak import synthesize
+
+        _, pitch, wpm = self._SETTINGS[voice.id]
+        speech = synthesize(text, voice.id, pitch=pitch, rate=round(min(max(wpm * rate, 80), 450)))
+        phones = [(p.text, p.start, p.end) for p in speech.phones if not p.text.startswith("_")]
+        words = [(w.text, w.start, w.end) for w in speech.words]
+        return Utterance(speech.audio, speech.sample_rate, phones, words, voice.name, alphabet="espeak")
+
+
+ENGINES: dict[str, Engine] = {e.name: e for e in (Espeak(), Flite(), Festival())}
 VOICES: dict[str, Voice] = {v.name: v for e in ENGINES.values() for v in e.voices}
 
 
