@@ -262,6 +262,9 @@ def _check_match(audio: np.ndarray, words: list[tuple[str, int, int]], gaps: np.
             raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {MAX_WORD_GAP:.0f}")
 
 
+Phone = tuple[str, float, float]  # (CMU phone, start s, end s)
+
+
 def align(audio: np.ndarray, sample_rate: int, transcript: str) -> list[Word]:
     """Word start/end times (s) of `transcript` in `audio` (mono, any rate), by forced alignment.
 
@@ -269,12 +272,25 @@ def align(audio: np.ndarray, sample_rate: int, transcript: str) -> list[Word]:
     out), in order, with the user's spelling. Raises FacegenError for an empty transcript, silent or
     too short audio, or a transcript that does not match the speech.
     """
+    return _align(audio, sample_rate, transcript, with_phones=False)[0]
+
+
+def align_phones(audio: np.ndarray, sample_rate: int, transcript: str) -> tuple[list[Word], list[Phone]]:
+    """The words of `align` and the phones inside them: (CMU phone without stress, start, end) in seconds,
+    pauses left out — pocketsphinx's phone alignment of the same search (a second pass over the audio)."""
+    return _align(audio, sample_rate, transcript, with_phones=True)
+
+
+def _align(audio: np.ndarray, sample_rate: int, transcript: str,
+           with_phones: bool) -> tuple[list[Word], list[Phone]]:
     entries = normalize_transcript(transcript)
     if not entries:
         raise FacegenError('the transcript is empty: pass the words spoken in the audio (e.g. --text "...")')
     audio = _pcm16k(audio, sample_rate)
     pcm = _pcm_bytes(audio)
     spoken = [(i, token) for i, (_, tokens) in enumerate(entries) for token in tokens]
+    duration = len(audio) / RATE
+    phones: list[Phone] = []
     with _LOCK:
         for kind in ("align", "align-wide", "align-nofiller"):
             decoder = _decoder(kind)
@@ -286,14 +302,28 @@ def align(audio: np.ndarray, sample_rate: int, transcript: str) -> list[Word]:
         else:
             raise _mismatch("no alignment of its words to the audio exists")
         n_frames = decoder.n_frames()
+        if with_phones:
+            phones = _phone_pass(decoder, pcm, duration)
         gaps, free = _match_scores(decoder, pcm, n_frames, words)
     _check_match(audio, words, gaps, free)
-    duration = len(audio) / RATE
     times: dict[int, list[float]] = {}
     for (index, _), (_, first, last) in zip(spoken, words, strict=True):
         start, end = first * FRAME, min((last + 1) * FRAME, duration)
         times.setdefault(index, [start, end])[1] = end
-    return [Word(entries[i][0], round(t[0], 3), round(t[1], 3)) for i, t in sorted(times.items())]
+    return [Word(entries[i][0], round(t[0], 3), round(t[1], 3)) for i, t in sorted(times.items())], phones
+
+
+def _phone_pass(decoder, pcm: bytes, duration: float) -> list[Phone]:
+    """The phones of the word alignment the decoder has just found (pocketsphinx: set_alignment, decode)."""
+    decoder.set_alignment()
+    decoder.start_utt()
+    decoder.process_raw(pcm, no_search=False, full_utt=True)
+    decoder.end_utt()
+    alignment = decoder.get_alignment()
+    if alignment is None:
+        raise _mismatch("pocketsphinx found no phone alignment for its words")
+    return [(phone.name, round(phone.start * FRAME, 3), round(min((phone.start + phone.duration) * FRAME, duration), 3))
+            for word in alignment if not _is_filler(word.name) for phone in word if phone.name != "SIL"]
 
 
 def recognize(audio: np.ndarray, sample_rate: int) -> list[Word]:

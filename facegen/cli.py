@@ -149,22 +149,33 @@ def render(input_file, output, compare, model, template, fps, size, views, error
 @click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")
 @click.option("--output", "-o", type=click.Path(dir_okay=False),
               help="words.json or words.TextGrid (default: JSON on stdout).")
-def align(audio, text, text_file, output):
-    """Find when each word of the transcript is spoken in AUDIO."""
+@click.option("--phones", is_flag=True,
+              help="Also write each word's phones (CMU, pocketsphinx phone alignment): a `phones` list / tier.")
+def align(audio, text, text_file, output, phones):
+    """Find when each word (and with --phones each phone) of the transcript is spoken in AUDIO."""
     from facegen.audio import check_speech, load_audio
     from facegen.pipeline import get_words
-    from facegen.words import write_alignment
+    from facegen.words import alignment_json, write_alignment
 
     _one_of(text=text, text_file=text_file)
     if output and Path(output).suffix.lower() not in (".json", ".textgrid"):
         raise FacegenError(f"cannot write alignments as {Path(output).suffix or 'no extension'}: use .json or .TextGrid")
     samples, sr = load_audio(audio)
     check_speech(samples, sr, 25.0, name=f"audio file {audio}")
-    words, _ = get_words(samples, sr, text=_read_text(text, text_file), warn=_progress(False))
-    if output:
-        write_alignment(words, output)
+    transcript = _read_text(text, text_file)
+    if phones:
+        if transcript is None:
+            raise FacegenError("--phones needs the transcript: pass --text or --text-file")
+        from facegen.align import align_phones
+
+        words, found = align_phones(samples, sr, transcript)
     else:
-        click.echo(json.dumps({"words": [{"word": w.text, "start": w.start, "end": w.end} for w in words]}, indent=1))
+        words, _ = get_words(samples, sr, text=transcript, warn=_progress(False))
+        found = None
+    if output:
+        write_alignment(words, output, duration=len(samples) / sr, phones=found)
+    else:
+        click.echo(json.dumps(alignment_json(words, found), indent=1))
 
 
 @cli.command()

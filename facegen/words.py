@@ -380,21 +380,33 @@ def _validate(words: list[Word], path: Path, duration: float | None) -> None:
                    f"{duration:g} s (is it the alignment of another recording?)")
 
 
-def write_alignment(words: list[Word], path: str | os.PathLike, duration: float | None = None) -> Path:
-    """Write words as our plain JSON ({"words": [{"word", "start", "end"}]}), a TextGrid or a CSV.
+def alignment_json(words: list[Word], phones: list[tuple[str, float, float]] | None = None) -> dict:
+    """Our plain JSON alignment: {"words": [{"word", "start", "end"}]} (+ "phones": [{"phone", "start", "end"}])."""
+    payload: dict = {"words": [{"word": w.text, "start": round(w.start, 6), "end": round(w.end, 6)} for w in words]}
+    if phones is not None:
+        payload["phones"] = [{"phone": p, "start": round(a, 6), "end": round(b, 6)} for p, a, b in phones]
+    return payload
+
+
+def write_alignment(words: list[Word], path: str | os.PathLike, duration: float | None = None,
+                    phones: list[tuple[str, float, float]] | None = None) -> Path:
+    """Write words (and phones) as our plain JSON (`alignment_json`), a TextGrid or a CSV (words only).
 
     The format follows the suffix (.json, .TextGrid, .csv). A TextGrid gets a `words` interval tier
-    with empty intervals for pauses, spanning 0 to `duration` (default: the last word's end).
+    (and a `phones` tier) with empty intervals for pauses, spanning 0 to `duration` (default: the last end).
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".json":
-        payload = {"words": [{"word": w.text, "start": round(w.start, 6), "end": round(w.end, 6)}
-                             for w in words]}
-        content = json.dumps(payload, indent=1, ensure_ascii=False) + "\n"
+        content = json.dumps(alignment_json(words, phones), indent=1, ensure_ascii=False) + "\n"
     elif suffix == ".textgrid":
-        content = _textgrid(words, duration)
+        tiers = {"words": [(w.text, w.start, w.end) for w in words]}
+        if phones is not None:
+            tiers["phones"] = list(phones)
+        content = _textgrid(tiers, duration)
     elif suffix == ".csv":
+        if phones is not None:
+            raise FacegenError(f"cannot write phones to {path}: use a .json or .TextGrid file name")
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(["word", "start", "end"])
@@ -407,25 +419,27 @@ def write_alignment(words: list[Word], path: str | os.PathLike, duration: float 
     return path
 
 
-def _textgrid(words: list[Word], duration: float | None) -> str:
-    """Long-format TextGrid text with times to the microsecond (praatio's writer prints them as repr or
-    integers, e.g. "xmax = 2", so ours is kept)."""
-    end = max([duration or 0.0] + [w.end for w in words])
-    intervals: list[tuple[float, float, str]] = []
-    t = 0.0
-    for w in words:
-        if w.start > t + 1e-9:
-            intervals.append((t, w.start, ""))
-        intervals.append((max(w.start, t), w.end, w.text))
-        t = w.end
-    if end > t + 1e-9 or not intervals:
-        intervals.append((t, end, ""))
+def _textgrid(tiers: dict[str, list[tuple[str, float, float]]], duration: float | None) -> str:
+    """Long-format TextGrid text, one interval tier per entry of `tiers` (label, start, end), with empty
+    intervals for pauses and times to the microsecond (praatio's writer prints them as repr or integers,
+    e.g. "xmax = 2", so ours is kept)."""
+    end = max([duration or 0.0] + [b for items in tiers.values() for _, _, b in items])
     lines = ['File type = "ooTextFile"', 'Object class = "TextGrid"', "", "xmin = 0", f"xmax = {end:.6f}",
-             "tiers? <exists>", "size = 1", "item []:", "    item [1]:", '        class = "IntervalTier"',
-             '        name = "words"', "        xmin = 0", f"        xmax = {end:.6f}",
-             f"        intervals: size = {len(intervals)}"]
-    for k, (a, b, label) in enumerate(intervals, 1):
-        quoted = label.replace('"', '""')
-        lines += [f"        intervals [{k}]:", f"            xmin = {a:.6f}", f"            xmax = {b:.6f}",
-                  f'            text = "{quoted}"']
+             "tiers? <exists>", f"size = {len(tiers)}", "item []:"]
+    for n, (name, items) in enumerate(tiers.items(), 1):
+        intervals: list[tuple[float, float, str]] = []
+        t = 0.0
+        for label, a, b in items:
+            if a > t + 1e-9:
+                intervals.append((t, a, ""))
+            intervals.append((max(a, t), b, label))
+            t = b
+        if end > t + 1e-9 or not intervals:
+            intervals.append((t, end, ""))
+        lines += [f"    item [{n}]:", '        class = "IntervalTier"', f'        name = "{name}"',
+                  "        xmin = 0", f"        xmax = {end:.6f}", f"        intervals: size = {len(intervals)}"]
+        for k, (a, b, label) in enumerate(intervals, 1):
+            quoted = label.replace('"', '""')
+            lines += [f"        intervals [{k}]:", f"            xmin = {a:.6f}", f"            xmax = {b:.6f}",
+                      f'            text = "{quoted}"']
     return "\n".join(lines) + "\n"

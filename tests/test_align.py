@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from facegen.align import align, recognize
+from facegen.align import align, align_phones, recognize
 from facegen.errors import FacegenError
 from facegen.espeak import Speech, espeak_to_cmu, pronounce, synthesize
 from facegen.words import Word, normalize_transcript, read_alignment, write_alignment
@@ -93,6 +93,29 @@ def test_alignment_matches_the_synthesiser_timing(corpus):
     print(f"clean speech: median word onset error {median * 1000:.1f} ms over {len(errors)} words, "
           f"90th percentile {np.percentile(errors, 90) * 1000:.1f} ms")
     assert median <= 0.030
+
+
+def test_phone_alignment_matches_the_synthesiser_phones(corpus):
+    """`align_phones`: the same words as `align`, and CMU phones inside them that start where espeak's do."""
+    errors, closures = [], 0
+    for text, speech in corpus:
+        audio = padded(speech)
+        words, phones = align_phones(audio, speech.sample_rate, text)
+        assert [(w.text, w.start, w.end) for w in words] == [(w.text, w.start, w.end)
+                                                              for w in align(audio, speech.sample_rate, text)]
+        starts = [a for _, a, _ in phones]
+        assert starts == sorted(starts) and all(b > a for _, a, b in phones)
+        assert all(words[0].start - 1e-6 <= a and b <= words[-1].end + 1e-6 for _, a, b in phones)
+        truth = [(p, ph.start + PAD) for ph in speech.phones for p in espeak_to_cmu([ph.text])[:1]]
+        said = [p for p, _, _ in phones]
+        # phones both agree on, in order: onset error against the synthesiser's own phone boundaries
+        matcher = __import__("difflib").SequenceMatcher(a=[p for p, _ in truth], b=said, autojunk=False)
+        for block in matcher.get_matching_blocks():
+            for k in range(block.size):
+                errors.append(abs(phones[block.b + k][1] - truth[block.a + k][1]))
+        closures += sum(p in ("P", "B", "M") for p in said)
+    assert len(errors) > 100 and closures >= 8
+    assert np.median(errors) < 0.03, np.median(errors)
 
 
 def test_noisy_speech_still_aligns(corpus):
