@@ -36,7 +36,6 @@ import torch
 from facegen.datasets.biwi import Dataset, Item
 from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
-from facegen.model import one_hot
 from facegen.runtime import Say, select_device, silent, warn_stderr
 
 if TYPE_CHECKING:
@@ -138,7 +137,7 @@ class Run:
         with torch.inference_mode():
             mel = torch.from_numpy(item.mel)[None].to(dev)
             text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
-            speaker = one_hot(condition, len(self.bundle.speakers)).to(dev)
+            speaker = model.speaker_one_hot(condition).to(dev)
             offsets = model(mel, text, speaker)[0].cpu().numpy()
             enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker).items()}
                    if encoders else {})
