@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from facegen.data import Item, Sequence
+from facegen.datasets.biwi import Item, Sequence
 from facegen.model import FaceModel, ModelConfig
 from facegen.train import CHECKPOINT, Batch, epoch_order, save_checkpoint, torch_settings, train_epoch
 

@@ -277,7 +277,7 @@ def _split_options(f):
 
 
 def _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences):
-    from facegen.data import Splits
+    from facegen.datasets.splits import Splits
 
     return Splits.from_options(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
 
@@ -367,7 +367,7 @@ def data():
 @click.option("--quiet", "-q", is_flag=True)
 def import_biwi(raw, out, transcripts, regions, subjects, quiet):
     """Convert the raw BIWI release RAW into the community layout in OUT."""
-    from facegen.data import import_biwi as run
+    from facegen.datasets.raw import import_biwi as run
 
     report = run(raw, out, transcripts=transcripts, regions=regions,
                  subjects=subjects.split(",") if subjects else None, progress=not quiet)

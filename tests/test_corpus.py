@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from facegen.data import Dataset, Splits, sequence_name
+from facegen.datasets.biwi import Dataset
+from facegen.datasets.splits import Splits, sequence_name
 from facegen.errors import FacegenError
 from facegen.synth import corpus
 from facegen.synth.curves import VOWELS, phone_visemes

@@ -16,28 +16,15 @@ import soundfile as sf
 from helpers import TOY_SPLITS, grid_face, make_dataset
 
 from facegen.audio import FeatureConfig, mel_filters
-from facegen.data import (
-    Dataset,
-    DatasetWriter,
-    Splits,
-    import_biwi,
-    parse_numbers,
-    read_templates_pkl,
-    read_transcripts,
-    read_vl,
-    write_templates_pkl,
-    write_vl,
-)
+from facegen.datasets.biwi import Dataset, DatasetWriter
+from facegen.datasets.raw import import_biwi, read_transcripts, read_vl, write_vl
+from facegen.datasets.splits import Splits, parse_numbers
+from facegen.datasets.templates import read_templates_pkl, write_templates_pkl
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
 
 FPS = 25
 SR = 16000
-
-
-
-
-
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import pytest
 import torch
 from helpers import TOY_SPLITS, grid_face, make_bundle, make_dataset
 
-from facegen.data import Splits
+from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.evaluate import evaluate, format_table, pool, sequence_metrics
 
@@ -107,7 +107,7 @@ def bundle_path(tmp_path_factory):
 
 def test_evaluate_test_a_uses_each_sequence_own_speaker(toy, bundle_path):
     from facegen.bundle import load_bundle
-    from facegen.data import Dataset
+    from facegen.datasets.biwi import Dataset
     from facegen.mesh import read_region
 
     result = evaluate(bundle_path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
@@ -133,7 +133,7 @@ def test_evaluate_test_a_uses_each_sequence_own_speaker(toy, bundle_path):
 
 def test_evaluate_test_b_averages_over_every_training_speaker(toy, bundle_path):
     from facegen.bundle import load_bundle
-    from facegen.data import Dataset
+    from facegen.datasets.biwi import Dataset
     from facegen.mesh import read_region
 
     result = evaluate(bundle_path, toy, "test-b", splits=TOY_SPLITS, quiet=True, warn=None)
@@ -165,7 +165,7 @@ def test_a_zero_model_scores_the_motion_itself(toy, tmp_path):
     result = evaluate(path, toy, "val", splits=TOY_SPLITS, quiet=True, warn=None)
     # predicting the template: LVE = mean over frames of the max lip displacement squared; the data's
     # lips move down by 0.04 * (1 + 0.2 k) * envelope; FDD = the truth's own upper-face dynamics (>= 0)
-    from facegen.data import Dataset
+    from facegen.datasets.biwi import Dataset
 
     ds = Dataset(toy, warn=None)
     lve = []
@@ -188,6 +188,9 @@ def test_evaluate_refuses_mismatches(toy, bundle_path, tmp_path):
                         modalities="audio")
     with pytest.raises(FacegenError, match="have 200 vertices but the model 40"):
         evaluate(other.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
+    narrow = make_bundle(grid_face(), tmp_path / "narrow.safetensors", speakers=("F2", "F3"), text_dim=100)
+    with pytest.raises(FacegenError, match=r"gives 384-d features but the model was trained on 100-d \(minilm\)"):
+        evaluate(narrow.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
 
 
 def test_metrics_on_the_real_biwi_topology(biwi_template):

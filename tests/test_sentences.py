@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from facegen.data import sequence_name
+from facegen.datasets.splits import sequence_name
 from facegen.synth import sentences as S
 from facegen.synth.lexicon import CLASSES, HELD_OUT_LEXICON, LEXICON, ROLES, TRAIN_LEXICON, emotional_words
 from facegen.synth.sentences import (

@@ -14,7 +14,7 @@ from helpers import make_dataset, train_toy
 from safetensors import safe_open
 
 from facegen.bundle import load_bundle, read_metadata
-from facegen.data import Splits
+from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.runtime import select_device
 from facegen.train import CHECKPOINT, default_checkpoint_dir, epoch_order

@@ -30,9 +30,9 @@ Parallelism is per speaker.
 
 Selections: `speakers` and `sentences` (all 14 × e01–e48 by default), or `preset="paper"`: the training
 speakers (F2 F3 F4 M3 M4 M5) e01–e48 and the test-B speakers e37–e48 — 384 sequences, 12.7 GB,
-generated in ~1.5 min with 2 workers. With facegen.data.Splits the defaults give train/val/test-a/test-b;
-the unseen-emotion-word test is Splits(test_sentences=range(41, 49)) (test-a: training speakers, test-b:
-unseen speakers).
+generated in ~1.5 min with 2 workers. With facegen.datasets.splits.Splits the defaults give
+train/val/test-a/test-b; the unseen-emotion-word test is Splits(test_sentences=range(41, 49)) (test-a:
+training speakers, test-b: unseen speakers).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from facegen.atomic import atomic_path
-from facegen.data import sequence_name
+from facegen.datasets.splits import parse_numbers, parse_subjects, sequence_name
 from facegen.errors import FacegenError
 from facegen.synth.sentences import SENTENCES
 
@@ -106,8 +106,6 @@ def selection(speakers: str | Iterable[str] | None = None, sentences: str | Iter
               preset: str | None = None) -> dict[str, tuple[int, ...]]:
     """{speaker: sentence numbers} to generate: `speakers` × `sentences` (default all 14 × e01–e48),
     or a preset ("paper": training speakers e01–e48, test-B speakers e37–e48)."""
-    from facegen.data import parse_numbers, parse_subjects
-
     if preset is not None:
         if preset not in PRESETS:
             raise FacegenError(f"unknown preset {preset!r}: choose one of {', '.join(PRESETS)}")
@@ -252,7 +250,8 @@ def synthesize_corpus(out: str | os.PathLike, speakers: str | Iterable[str] | No
             todo[speaker] = tuple(missing)
     total = sum(len(v) for v in todo.values())
 
-    from facegen.data import DatasetWriter, read_templates_pkl
+    from facegen.datasets.biwi import DatasetWriter
+    from facegen.datasets.templates import read_templates_pkl
 
     writer = DatasetWriter(out)
     _check_space(out, total, fps)
@@ -369,7 +368,7 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
 def _speaker_job(out: str, speaker: str, numbers: tuple[int, ...], seed: int, fps: float) -> None:
     """Synthesise e01 … max(numbers) in order and write the sequences in `numbers`; print one JSON line
     per written sequence. Run in a fresh process (libespeak-ng's state), see _worker_main."""
-    from facegen.data import DatasetWriter
+    from facegen.datasets.biwi import DatasetWriter
 
     writer = DatasetWriter(out)
     rig, style = speaker_rig(speaker)

@@ -1,0 +1,373 @@
+"""The BIWI community layout (FaceFormer, CodeTalker): `Dataset` reads a dataset folder, `DatasetWriter`
+writes one.
+
+Layout of a dataset folder ROOT (names as the community uses them)::
+
+    ROOT/wav/{subj}_e{NN}.wav             speech
+    ROOT/vertices_npy/{subj}_e{NN}.npy    motion, [T, 3V] at 25 fps (float32 or float64; [T, V, 3] accepted)
+    ROOT/templates.pkl                    {subj: [V, 3]} neutral faces (read with a restricted unpickler)
+    ROOT/templates/{subj}.ply | .npy      the same, one file per subject (these win over templates.pkl)
+    ROOT/BIWI.ply                         the face list (and a neutral face: the template of trained bundles)
+    ROOT/regions/lve.txt, fdd.txt         lip region (LVE) and upper-face region (FDD), 0-based indices
+    ROOT/text/{subj}_e{NN}.txt            transcripts (for the text modality)
+    ROOT/alignments/{subj}_e{NN}.json     word timings you already have (.json, .TextGrid or .csv): used
+                                          instead of forced alignment
+
+Word alignments of transcripts are computed once with `facegen.align.align` and cached with the
+features (see facegen.datasets.cache).
+
+Region files map to bundle region names: lve.txt → "lips", fdd.txt → "upper_face"; any other
+regions/<name>.txt keeps its name.
+
+A sequence whose files are missing or unreadable is reported by name and skipped (`on_bad="skip"`,
+the default) or stops the run (`on_bad="fail"`); a vertex file whose vertex count differs from its
+subject's template is always an error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from collections.abc import Iterable
+from collections.abc import Sequence as SequenceABC
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from facegen.atomic import atomic_path
+from facegen.audio import FeatureConfig, write_wav
+from facegen.datasets.cache import (
+    BadSequence,
+    FeatureCache,
+    default_cache_dir,
+    digest,
+    read_json,
+    stat_key,
+    write_json,
+)
+from facegen.datasets.splits import Splits
+from facegen.datasets.templates import as_vertices, read_templates_pkl, write_templates_pkl
+from facegen.errors import FacegenError
+from facegen.mesh import Mesh, read_mesh, read_region, write_mesh, write_region
+from facegen.runtime import Say, silent, warn_stderr
+
+REGION_FILES = {"lve": "lips", "fdd": "upper_face"}  # community file stem → region name in bundles
+ALIGNMENT_SUFFIXES = (".json", ".textgrid", ".csv")
+LENGTH_RATIO = 0.8  # audio and motion shorter than this fraction of each other: the sequence is corrupt
+
+
+@dataclass
+class Sequence:
+    """The files of one sequence (transcript and alignment may be absent)."""
+
+    name: str
+    subject: str
+    wav: Path
+    vertices: Path
+    text: Path | None = None
+    alignment: Path | None = None
+
+
+@dataclass
+class Item:
+    """A sequence ready for training or evaluation: features in memory, vertices read on demand."""
+
+    seq: Sequence
+    mel: np.ndarray  # [T, n_mels] float32
+    text: np.ndarray | None  # [T, D] float32 or None
+    num_frames: int
+    template: np.ndarray  # [V, 3] float32, the subject's neutral face
+
+    @property
+    def name(self) -> str:
+        return self.seq.name
+
+    @property
+    def subject(self) -> str:
+        return self.seq.subject
+
+    def vertices(self) -> np.ndarray:
+        """The ground truth [T, 3V] float32, a writable copy read from the memory-mapped .npy."""
+        arr = np.load(self.seq.vertices, mmap_mode="r")
+        return np.array(arr[: self.num_frames].reshape(self.num_frames, -1), dtype=np.float32)
+
+
+class Dataset:
+    """A dataset folder in the community layout (see the module docstring)."""
+
+    def __init__(self, root: str | os.PathLike, *, cache_dir: str | os.PathLike | None = None,
+                 on_bad: str = "skip", warn: Say | None = warn_stderr) -> None:
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise FacegenError(f"dataset folder {self.root} does not exist: pass a folder with wav/ and "
+                               "vertices_npy/ (the BIWI community layout)")
+        for sub in ("wav", "vertices_npy"):
+            if not (self.root / sub).is_dir():
+                raise FacegenError(f"{self.root} has no {sub}/ folder: pass a dataset in the BIWI community "
+                                   "layout (wav/, vertices_npy/, templates.pkl, BIWI.ply)")
+        if on_bad not in ("skip", "fail"):
+            raise ValueError(f"on_bad must be 'skip' or 'fail', not {on_bad!r}")
+        self.on_bad = on_bad
+        self.warn = warn or silent
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir(self.root)
+        try:
+            self.cache_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FacegenError(f"cannot create the cache folder {self.cache_dir} ({exc.strerror}): "
+                               "pass --cache-dir to a writable folder") from exc
+        self.skipped: list[tuple[str, str]] = []  # (sequence, reason)
+        self._vertex_index_dirty = False
+
+    # ------------------------------------------------------------------ static parts
+    @cached_property
+    def templates(self) -> dict[str, np.ndarray]:
+        """Every subject's neutral face [V, 3] float32 (templates/ files win over templates.pkl)."""
+        out: dict[str, np.ndarray] = {}
+        pkl = self.root / "templates.pkl"
+        if pkl.is_file():
+            out.update(read_templates_pkl(pkl))
+        folder = self.root / "templates"
+        if folder.is_dir():
+            for path in sorted(folder.iterdir()):
+                if path.suffix.lower() == ".npy":
+                    try:
+                        arr = np.load(path, allow_pickle=False)
+                    except (OSError, ValueError) as exc:
+                        raise FacegenError(f"cannot read template {path} ({exc}): re-create it") from exc
+                    out[path.stem] = as_vertices(arr, f"template {path}")
+                elif path.suffix.lower() in (".ply", ".obj"):
+                    out[path.stem] = read_mesh(path).vertices
+        return out
+
+    def template(self, subject: str) -> np.ndarray:
+        if subject not in self.templates:
+            raise FacegenError(f"no template for subject {subject} in {self.root}/templates.pkl or "
+                               f"templates/{subject}.npy: add one")
+        return self.templates[subject]
+
+    @cached_property
+    def regions(self) -> dict[str, np.ndarray]:
+        """Regions from ROOT/regions/*.txt: lve.txt → "lips", fdd.txt → "upper_face", others by name."""
+        out: dict[str, np.ndarray] = {}
+        folder = self.root / "regions"
+        if folder.is_dir():
+            for path in sorted(folder.glob("*.txt")):
+                name = REGION_FILES.get(path.stem, path.stem)
+                if path.stem in REGION_FILES or name not in out:
+                    out[name] = read_region(path)
+        return out
+
+    @cached_property
+    def mesh(self) -> Mesh:
+        """BIWI.ply (its vertices and faces) with the dataset's regions."""
+        path = self.root / "BIWI.ply"
+        if not path.is_file():
+            raise FacegenError(f"{path} is missing: the dataset needs the face list (BIWI.ply of the "
+                               "community layout, e.g. from the CodeTalker repository)")
+        mesh = read_mesh(path)
+        for name, idx in self.regions.items():
+            if idx.size and (idx.min() < 0 or idx.max() >= mesh.num_vertices):
+                raise FacegenError(f"region {name} of {self.root}/regions has indices outside the mesh's "
+                                   f"{mesh.num_vertices} vertices: use region files made for this mesh")
+        mesh.regions = dict(self.regions)
+        return mesh
+
+    # ------------------------------------------------------------------ sequences
+    def bad(self, name: str, reason: str) -> None:
+        """Report a sequence that cannot be used: skipped with a warning, or an error (on_bad="fail")."""
+        if self.on_bad == "fail":
+            raise FacegenError(f"sequence {name}: {reason} (fix or remove it, or skip bad sequences)")
+        self.skipped.append((name, reason))
+        self.warn(f"skipping sequence {name}: {reason}")
+
+    def sequence(self, name: str) -> Sequence:
+        subject = name.split("_")[0]
+        text = self.root / "text" / f"{name}.txt"
+        alignment = None
+        folder = self.root / "alignments"
+        if folder.is_dir():
+            for path in sorted(folder.glob(f"{name}.*")):
+                if path.suffix.lower() in ALIGNMENT_SUFFIXES:
+                    alignment = path
+                    break
+        wav, npy = self.root / "wav" / f"{name}.wav", self.root / "vertices_npy" / f"{name}.npy"
+        return Sequence(name, subject, wav, npy, text if text.is_file() else None, alignment)
+
+    def sequences(self, names: Iterable[str]) -> list[Sequence]:
+        """The sequences whose wav and npy files exist (others reported as bad)."""
+        out = []
+        for name in names:
+            seq = self.sequence(name)
+            missing = [p.relative_to(self.root).as_posix() for p in (seq.wav, seq.vertices)
+                       if not p.is_file()]
+            if missing:
+                self.bad(name, f"{' and '.join(missing)} missing")
+                continue
+            out.append(seq)
+        return out
+
+    def split(self, split: str, splits: Splits | None = None) -> list[Sequence]:
+        return self.sequences((splits or Splits()).names(split))
+
+    # ------------------------------------------------------------------ per-sequence data
+    def vertex_frames(self, seq: Sequence, num_vertices: int) -> int:
+        """Frames of the sequence's vertex file after checking it (shape, finite values); cached by stat."""
+        index = self._vertex_index
+        key = stat_key(seq.vertices)
+        entry = index.get(seq.name)
+        if entry and entry.get("stat") == key and entry.get("num_vertices") == num_vertices:
+            return int(entry["frames"])
+        try:
+            arr = np.load(seq.vertices, mmap_mode="r", allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
+            raise BadSequence(f"{seq.vertices.name} is not a readable .npy file ({exc})") from exc
+        shape = arr.shape
+        if arr.ndim == 3 and shape[2] == 3:
+            v = shape[1]
+        elif arr.ndim == 2 and shape[1] % 3 == 0:
+            v = shape[1] // 3
+        else:
+            raise BadSequence(f"{seq.vertices.name} has shape {shape}, not [T, 3V]")
+        if v != num_vertices:
+            raise FacegenError(f"{seq.vertices} has {v} vertices per frame but the template of {seq.subject} "
+                               f"has {num_vertices}: the vertex files and templates must share one topology")
+        if shape[0] == 0:
+            raise BadSequence(f"{seq.vertices.name} has no frames")
+        if arr.dtype.kind != "f":
+            raise BadSequence(f"{seq.vertices.name} holds {arr.dtype}, not floats")
+        for start in range(0, shape[0], 64):
+            if not np.isfinite(arr[start:start + 64]).all():
+                raise BadSequence(f"{seq.vertices.name} contains NaN or infinite coordinates")
+        index[seq.name] = {"stat": key, "num_vertices": num_vertices, "frames": int(shape[0])}
+        self._vertex_index_dirty = True
+        return int(shape[0])
+
+    @cached_property
+    def _vertex_index(self) -> dict:
+        return read_json(self.cache_dir / "vertices.json")
+
+    def _save_vertex_index(self) -> None:
+        if self._vertex_index_dirty:
+            write_json(self.cache_dir / "vertices.json", self._vertex_index)
+            self._vertex_index_dirty = False
+
+    def words(self, seq: Sequence, samples: np.ndarray, sr: int) -> list:
+        """Word timings: the user's alignment file, else the transcript aligned once (and cached)."""
+        from facegen import align
+        from facegen.words import read_alignment, write_alignment
+
+        duration = len(samples) / sr
+        if seq.alignment is not None:
+            return read_alignment(seq.alignment, duration=duration)
+        if seq.text is None:
+            raise BadSequence(f"no transcript text/{seq.name}.txt or alignment alignments/{seq.name}.json "
+                               "for the text modality")
+        transcript = seq.text.read_text(encoding="utf-8", errors="replace")
+        key = digest([stat_key(seq.wav), stat_key(seq.text)])
+        cached = self.cache_dir / "alignments" / f"{seq.name}-{key}.json"
+        if cached.is_file():
+            with contextlib.suppress(FacegenError):  # a damaged cache entry is recomputed
+                return read_alignment(cached, duration=duration)
+        if not transcript.strip():
+            return []
+        words = align.align(samples, sr, transcript)
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        write_alignment(words, cached)  # atomically
+        return words
+
+    def load(self, sequences: SequenceABC[Sequence], features: FeatureConfig, filters: np.ndarray,
+             backend=None, progress: bool = False) -> list[Item]:
+        """Features of every usable sequence (from the cache when it has them); bad ones reported."""
+        from tqdm import tqdm
+
+        cache = FeatureCache(self.cache_dir, features, filters, backend)
+        items = []
+        bar = tqdm(sequences, desc="features", unit="seq", disable=not progress or not sequences,
+                   file=sys.stderr, leave=False)
+        try:
+            for seq in bar:
+                item = self._load_one(seq, cache)
+                if item is not None:
+                    items.append(item)
+        finally:
+            self._save_vertex_index()
+        return items
+
+    def _load_one(self, seq: Sequence, cache: FeatureCache) -> Item | None:
+        if seq.subject not in self.templates:
+            self.bad(seq.name, f"no template for subject {seq.subject} (templates.pkl or templates/)")
+            return None
+        template = self.templates[seq.subject]
+        try:
+            frames = self.vertex_frames(seq, template.shape[0])
+            mel, text = cache.features(self, seq)
+        except BadSequence as exc:
+            self.bad(seq.name, str(exc))
+            return None
+        audio_frames = mel.shape[0]
+        if min(audio_frames, frames) < LENGTH_RATIO * max(audio_frames, frames):
+            self.bad(seq.name, f"the audio lasts {audio_frames} frames but the motion {frames} frames")
+            return None
+        n = min(audio_frames, frames)
+        return Item(seq, mel[:n], None if text is None else text[:n], n, template)
+
+
+class DatasetWriter:
+    """Write a dataset in the community layout (import-biwi and the synthetic corpus use it).
+
+    Every file is written atomically. Vertex files are float32 [T, 3V]; templates go to templates.pkl.
+    """
+
+    def __init__(self, root: str | os.PathLike) -> None:
+        self.root = Path(root)
+        try:
+            for sub in ("wav", "vertices_npy", "regions"):
+                (self.root / sub).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FacegenError(f"cannot create the dataset folder {self.root} ({exc.strerror}): "
+                               "choose a writable place") from exc
+
+    def write_mesh(self, mesh: Mesh) -> None:
+        """BIWI.ply and its regions (lips → regions/lve.txt, upper_face → regions/fdd.txt, others by name)."""
+        with atomic_path(self.root / "BIWI.ply") as tmp:
+            write_mesh(mesh, tmp)
+        self.write_regions(mesh.regions)
+
+    def write_regions(self, regions: dict[str, np.ndarray]) -> None:
+        """regions/<file>.txt per region (lips → lve.txt, upper_face → fdd.txt, others by name)."""
+        names = {v: k for k, v in REGION_FILES.items()}
+        for name, idx in regions.items():
+            with atomic_path(self.root / "regions" / f"{names.get(name, name)}.txt") as tmp:
+                write_region(idx, tmp)
+
+    def write_templates(self, templates: dict[str, np.ndarray]) -> None:
+        write_templates_pkl(templates, self.root / "templates.pkl")
+
+    def write_sequence(self, name: str, vertices: np.ndarray, *, audio: np.ndarray | None = None,
+                       sample_rate: int | None = None, transcript: str | None = None,
+                       words: list | None = None) -> None:
+        """vertices [T, V, 3] or [T, 3V]; audio mono float samples (written as 16-bit PCM WAV)."""
+        v = np.ascontiguousarray(np.asarray(vertices, np.float32).reshape(len(vertices), -1))
+        with atomic_path(self.root / "vertices_npy" / f"{name}.npy") as tmp:
+            np.save(tmp, v)
+        if audio is not None:
+            self.write_wav(name, audio, int(sample_rate or 16000))
+        if transcript is not None:
+            self.write_transcript(name, transcript)
+        if words is not None:
+            from facegen.words import write_alignment
+
+            (self.root / "alignments").mkdir(exist_ok=True)
+            write_alignment(words, self.root / "alignments" / f"{name}.json")  # atomically
+
+    def write_wav(self, name: str, audio: np.ndarray, sample_rate: int) -> None:
+        with atomic_path(self.root / "wav" / f"{name}.wav") as tmp:
+            write_wav(audio, sample_rate, tmp)
+
+    def write_transcript(self, name: str, transcript: str) -> None:
+        (self.root / "text").mkdir(exist_ok=True)
+        with atomic_path(self.root / "text" / f"{name}.txt") as tmp:
+            tmp.write_text(transcript.strip() + "\n", encoding="utf-8")
