@@ -36,7 +36,7 @@ import torch
 from facegen.datasets.biwi import Dataset, Item
 from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
-from facegen.runtime import Say, select_device, silent, warn_stderr
+from facegen.runtime import Say, say_stderr, select_device, silent, warn_stderr
 
 if TYPE_CHECKING:
     from facegen.bundle import Bundle
@@ -165,7 +165,7 @@ def prepare(
     from facegen.bundle import load_bundle
 
     check_split(split)
-    say = silent if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    say = silent if quiet else say_stderr
     bundle = load_bundle(bundle_path)
     dev = select_device(device, say, task="evaluation")
     if splits is None:

@@ -106,16 +106,12 @@ def prepare_clip(
     if bundle.config.uses_text and not no_text:
         with PROFILE.stage("alignment"):
             words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress, warn=warn)
-        from facegen.text import load_text_backend, text_features
+        from facegen.text import check_text_dim, load_text_backend, text_features
 
         progress(f"text features ({bundle.text_backend}) for {len(words)} words")
         with PROFILE.stage("text_model_load"):
             backend = load_text_backend(bundle.text_backend, text_model)
-        if backend.dim != bundle.config.text_dim:
-            raise FacegenError(
-                f"text model {backend.id} gives {backend.dim}-d features but the model was trained on "
-                f"{bundle.config.text_dim}-d ({bundle.text_backend}): pass the matching --text-model"
-            )
+        check_text_dim(backend, bundle.config.text_dim, bundle.text_backend)
         with PROFILE.stage("text_features"):
             text_feats = text_features(words, backend, T, cfg.fps)
 

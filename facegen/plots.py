@@ -39,7 +39,7 @@ from facegen.datasets.biwi import Item
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
-from facegen.runtime import silent
+from facegen.runtime import say_stderr, silent
 
 if TYPE_CHECKING:
     from facegen.evaluate import Run
@@ -315,7 +315,7 @@ def write_plots(
     modality, no loss history) are skipped with a note on stderr unless `quiet`."""
     from facegen.evaluate import prepare  # torch: only when figures are drawn
 
-    say = silent if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    say = silent if quiet else say_stderr
     out_dir = Path(plots_dir)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)

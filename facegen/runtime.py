@@ -126,6 +126,11 @@ def select_device(device: str = "auto", say: Say = silent, task: str = "inferenc
     return torch.device(name)
 
 
+def say_stderr(message: str) -> None:
+    """The default Say for progress: "facegen: message" on stderr."""
+    print(f"facegen: {message}", file=sys.stderr)
+
+
 def warn_stderr(message: str) -> None:
     """The default Say for warnings: one line on stderr."""
     print(f"facegen: warning: {message}", file=sys.stderr)

@@ -47,7 +47,7 @@ from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
 from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig, one_hot
-from facegen.runtime import Say, select_device, silent, warn_stderr
+from facegen.runtime import Say, say_stderr, select_device, silent, warn_stderr
 
 CHECKPOINT = "checkpoint.safetensors"
 CHECKPOINT_VERSION = 1
@@ -321,7 +321,7 @@ def train(
     sequences, "fail" stops at the first. `precision` (fp32, fp16, int8; see facegen.bundle) is how the
     bundle stores its weights; `half=True` is short for precision="fp16". Checkpoints are always fp32.
     """
-    say = silent if quiet else (lambda m: print(f"facegen: {m}", file=sys.stderr))
+    say = silent if quiet else say_stderr
     warn = warn or silent
     if modalities not in MODALITIES:
         raise FacegenError(f"unknown modalities {modalities!r}: choose one of {', '.join(MODALITIES)}")
