@@ -200,29 +200,19 @@ def prepare(
     return Run(bundle, dataset, split, items, dev, lips, upper)
 
 
-def evaluate(
-    bundle_path: str | os.PathLike | None,
-    data_root: str | os.PathLike,
-    split: str = "test-a",
-    *,
-    splits: Splits | None = None,
-    cache_dir: str | os.PathLike | None = None,
-    text_model_path: str | os.PathLike | None = None,
-    device: str = "cpu",
-    on_bad: str = "skip",
-    quiet: bool = False,
-    warn: Say | None = warn_stderr,
-) -> dict:
+def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike, split: str = "test-a",
+             **options) -> dict:
     """Evaluate a model bundle on a split of the dataset at `data_root` (see the module docstring).
 
+    `options` are those of `prepare` (splits, cache_dir, text_model_path, device, on_bad, quiet, warn);
     `splits` defaults to the split the bundle was trained with (its provenance), else the community's
     with the bundle's speakers as training subjects. Returns a JSON-ready dict: bundle, data, split,
     conditioning, metrics (pooled), units, per_sequence rows, skipped sequences.
     """
     from tqdm import tqdm
 
-    run = prepare(bundle_path, data_root, split, splits=splits, cache_dir=cache_dir,
-                  text_model_path=text_model_path, device=device, on_bad=on_bad, quiet=quiet, warn=warn)
+    run = prepare(bundle_path, data_root, split, **options)
+    quiet = options.get("quiet", False)
     bundle, dataset, items = run.bundle, run.dataset, run.items
     num_vertices = bundle.template.num_vertices
     pooled_rows: list[dict] = []
