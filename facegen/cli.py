@@ -301,11 +301,17 @@ def _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_
               help="How the bundle stores its weights.")
 @click.option("--threads", type=int, help="CPU threads for torch (default: all cores).")
 @click.option("--strict", is_flag=True, help="Refuse to train when a sequence is missing or corrupt (default: skip it).")
+@click.option("--output-layer", "output_layer", type=click.Choice(["full", "pca"]), default="full", show_default=True,
+              help="full: the paper's FC 3V; pca: the same layer trained in a PCA basis of the training motion.")
+@click.option("--basis", default=64, show_default=True, help="Dimensions of the PCA basis (--output-layer pca).")
+@click.option("--lip-weight", default=0.0, show_default=True, help="Extra loss on the lip vertices (pca only).")
+@click.option("--velocity-weight", default=0.0, show_default=True, help="Loss on frame-to-frame motion (pca only).")
+@click.option("--patience", type=int, help="Stop after this many epochs without a better validation loss.")
 @_split_options
 @click.option("--quiet", "-q", is_flag=True)
 def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device, resume,
-          checkpoint_dir, precision, threads, strict, train_subjects, test_subjects, train_sentences, val_sentences,
-          test_sentences, quiet):
+          checkpoint_dir, precision, threads, strict, output_layer, basis, lip_weight, velocity_weight, patience,
+          train_subjects, test_subjects, train_sentences, val_sentences, test_sentences, quiet):
     """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
     import os
 
@@ -316,7 +322,8 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
     result = run(data, output, text_backend=text_backend, text_model_path=text_model, modalities=modalities,
                  fusion=fusion, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, device=device,
                  resume=resume, splits=splits, checkpoint_dir=checkpoint_dir, precision=precision, threads=threads,
-                 on_bad="fail" if strict else "skip", quiet=quiet)
+                 on_bad="fail" if strict else "skip", quiet=quiet, output=output_layer, basis=basis,
+                 lip_weight=lip_weight, velocity_weight=velocity_weight, patience=patience)
     click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs, "best_epoch": result.best_epoch,
                            "best_loss": result.best_loss, "seconds": round(result.seconds, 1),
                            "curves": str(result.curves_csv), "skipped": len(result.skipped)}))

@@ -138,13 +138,17 @@ class Batch:
         self.template = item.template.reshape(-1)
         self.device = device
 
+        self.coefficients: torch.Tensor | None = None  # [T, K] targets when training in a PCA basis
+
     def target(self) -> torch.Tensor:
         """Ground-truth offsets from the subject's template, [T, 3V] float32."""
         v = self.item.vertices()
         v -= self.template
         return torch.from_numpy(v).to(self.device)
 
-    def loss(self, model: FaceModel) -> torch.Tensor:
+    def loss(self, model: FaceModel, coefficient_loss=None) -> torch.Tensor:
+        if self.coefficients is not None:
+            return coefficient_loss(model.coefficients(self.mel, self.text, self.speaker)[0], self.coefficients)
         out = model(self.mel, self.text, self.speaker)
         return torch.nn.functional.mse_loss(out.view(out.shape[1], -1), self.target())
 
@@ -161,7 +165,7 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
 
 
 def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: list[Batch], order,
-                batch_size: int = 1, bar=None) -> float:
+                batch_size: int = 1, bar=None, coefficient_loss=None) -> float:
     """One pass over `batches` in `order`, one optimizer step per `batch_size` sequences; the mean loss.
 
     Raises _NonFinite at the first NaN or infinite loss (before it reaches the weights).
@@ -171,7 +175,7 @@ def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: lis
     total = 0.0
     for step, index in enumerate(order):
         batch = batches[index]
-        loss = batch.loss(model)
+        loss = batch.loss(model, coefficient_loss)
         value = float(loss.detach())
         if not math.isfinite(value):
             raise _NonFinite(batch.item.name, value)
@@ -187,12 +191,12 @@ def train_epoch(model: FaceModel, optimizer: torch.optim.Optimizer, batches: lis
     return total / max(len(order), 1)
 
 
-def _validate(model: FaceModel, batches: list[Batch]) -> float:
+def _validate(model: FaceModel, batches: list[Batch], coefficient_loss=None) -> float:
     if not batches:
         return float("nan")
     model.eval()
     with torch.no_grad():
-        losses = [float(b.loss(model)) for b in batches]
+        losses = [float(b.loss(model, coefficient_loss)) for b in batches]
     model.train()
     return float(np.mean(losses))
 
@@ -310,6 +314,11 @@ def train(
     quiet: bool = False,
     half: bool = False,
     precision: str | None = None,
+    output: str = "full",
+    basis: int = 64,
+    lip_weight: float = 0.0,
+    velocity_weight: float = 0.0,
+    patience: int | None = None,
     warn: Say | None = warn_stderr,
 ) -> TrainResult:
     """Train a model on the dataset at `data_root` and write the best checkpoint as a bundle.
@@ -320,6 +329,10 @@ def train(
     ModelConfig sizes (e.g. small models for tests). `on_bad` "skip" reports and skips unusable
     sequences, "fail" stops at the first. `precision` (fp32, fp16, int8; see facegen.bundle) is how the
     bundle stores its weights; `half=True` is short for precision="fp16". Checkpoints are always fp32.
+    `output` "full" is the paper's FC 3V; "pca" trains it in a `basis`-dimensional PCA basis of the training
+    motion (facegen.motion_basis; the bundle stores the folded FC 3V), where `lip_weight` and
+    `velocity_weight` add lip-vertex and frame-to-frame terms to the loss (0: the paper's MSE). `patience`
+    stops after that many epochs without a better validation loss (None: run every epoch).
     """
     say = silent if quiet else say_stderr
     warn = warn or silent
@@ -330,6 +343,16 @@ def train(
     if epochs < 1 or batch_size < 1 or not lr > 0 or (max_sequences is not None and max_sequences < 1):
         raise FacegenError("epochs, batch size and max sequences must be at least 1 and the learning rate "
                            "positive")
+    if output not in ("full", "pca"):
+        raise FacegenError(f"unknown output {output!r}: choose full (the paper's FC 3V) or pca")
+    if output == "pca" and basis < 1:
+        raise FacegenError(f"--basis {basis} must be at least 1")
+    if not (lip_weight >= 0 and velocity_weight >= 0 and math.isfinite(lip_weight + velocity_weight)):
+        raise FacegenError("--lip-weight and --velocity-weight must be finite and at least 0")
+    if (lip_weight or velocity_weight) and output != "pca":
+        raise FacegenError("--lip-weight and --velocity-weight need --output pca")
+    if patience is not None and patience < 1:
+        raise FacegenError(f"--patience {patience} must be at least 1")
     out_bundle = Path(out_bundle)
     if not out_bundle.parent.is_dir() and str(out_bundle.parent):
         raise FacegenError(f"output folder {out_bundle.parent} does not exist: create it or choose another "
@@ -370,17 +393,39 @@ def train(
     speakers = list(splits.train_subjects)
     cfg = ModelConfig(num_vertices=mesh.num_vertices, num_speakers=len(speakers),
                       text_dim=backend.dim if backend is not None else 0, modalities=modalities,
-                      fusion=fusion, **(model_options or {}))
+                      fusion=fusion, output_basis=basis if output == "pca" else 0, **(model_options or {}))
+    coefficients, coefficient_loss, val_loss_fn = {}, None, None
+    if output == "pca":
+        from facegen.motion_basis import CoefficientLoss, basis_digest, fit_basis, project
+
+        say(f"PCA basis of the training motion ({basis} directions)")
+        pca, pca_mean, kept = fit_basis(train_items, basis, seed=seed)
+        say(f"the basis keeps {100 * kept:.3f} % of the training motion's variance")
+        folder = dataset.cache_dir / f"coefficients-{basis_digest(pca, pca_mean)}"
+        folder.mkdir(parents=True, exist_ok=True)
+        for it in train_items + val_items:
+            path = folder / f"{it.name}.npy"
+            if path.is_file():
+                coefficients[it.name] = np.load(path)
+            else:
+                coefficients[it.name] = project(it, pca, pca_mean)
+                with atomic_path(path) as tmp:
+                    np.save(tmp, coefficients[it.name])
+        coefficient_loss = CoefficientLoss(pca, mesh.regions.get("lips"), lip_weight, velocity_weight, dev)
+        val_loss_fn = CoefficientLoss(pca, None)
     signature = {
         "model_config": cfg.to_dict(), "feature_config": features.to_dict(),
         "text_backend": backend.id if backend is not None else "none", "splits": splits.to_dict(),
         "seed": seed, "batch_size": batch_size, "train": [it.name for it in train_items],
-        "val": [it.name for it in val_items],
+        "val": [it.name for it in val_items], "output": output, "lip_weight": lip_weight,
+        "velocity_weight": velocity_weight,
     }
 
     with torch_settings(threads):
         torch.manual_seed(seed)
         model = FaceModel(cfg)
+        if output == "pca":
+            model.set_basis(torch.from_numpy(pca), torch.from_numpy(pca_mean))
         mels = np.concatenate([it.mel for it in train_items]).astype(np.float64)
         with torch.no_grad():
             model.mel_mean.copy_(torch.from_numpy(mels.mean(0)).float())
@@ -419,6 +464,9 @@ def train(
         train_batches = [Batch(it, speaker_of[it.subject], len(speakers), dev) for it in train_items]
         val_batches = [Batch(it, speaker_of[it.subject], len(speakers), dev) for it in val_items
                        if it.subject in speaker_of]
+        for b in train_batches + val_batches:
+            if b.item.name in coefficients:
+                b.coefficients = torch.from_numpy(coefficients[b.item.name]).to(dev)
         say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
             f"{len(val_batches)}, {epochs} epochs, device {dev}")
         run_start = last_png = time.perf_counter()
@@ -426,12 +474,16 @@ def train(
         from tqdm import tqdm
 
         for epoch in range(done, epochs):
+            if patience is not None and best_epoch and epoch - best_epoch >= patience:
+                say(f"no better validation loss for {patience} epochs: stopping after epoch {epoch}")
+                break
             t0 = time.perf_counter()
             order = epoch_order(seed, epoch, len(train_batches))
             bar = tqdm(total=len(order), desc=f"epoch {epoch + 1}/{epochs}", unit="seq", disable=quiet,
                        file=sys.stderr, leave=False, dynamic_ncols=True)
             try:
-                train_loss = train_epoch(model, optimizer, train_batches, order, batch_size, bar)
+                train_loss = train_epoch(model, optimizer, train_batches, order, batch_size, bar,
+                                         coefficient_loss)
             except _NonFinite as exc:
                 kept = (f"the last good checkpoint (epoch {epoch}) is in {ckpt_dir}" if epoch else
                         "no checkpoint was written yet")
@@ -439,7 +491,7 @@ def train(
                     f"the training loss became {exc.value} at epoch {epoch + 1} on {exc.name}: training "
                     f"stopped and {kept}: lower --lr (and --resume), or check that sequence") from None
             bar.close()
-            val_loss = _validate(model, val_batches)
+            val_loss = _validate(model, val_batches, val_loss_fn)
             score = val_loss if val_batches else train_loss
             improved = score < best_loss
             if improved:
@@ -472,7 +524,10 @@ def train(
                         if best_epoch else {}),
             "history": loss_history(history), "train_seconds": round(seconds, 1), "split": splits.to_dict(),
             "train_sequences": len(train_batches), "val_sequences": len(val_batches), "seed": seed, "lr": lr,
-            "batch_size": batch_size, "device": str(dev)})
+            "batch_size": batch_size, "device": str(dev), "output": output,
+            **({"basis": basis, "basis_variance": round(kept, 6), "lip_weight": lip_weight,
+                "velocity_weight": velocity_weight} if output == "pca" else {}),
+            **({"patience": patience} if patience else {})})
         from facegen.bundle import save_bundle
 
         save_bundle(bundle, out_bundle, precision=precision or ("fp16" if half else "fp32"))

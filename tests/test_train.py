@@ -146,3 +146,33 @@ def test_device_choice_without_cuda(toy, tmp_path):
         train_toy(toy, tmp_path / "c.safetensors", device="cuda")
     with pytest.raises(FacegenError, match="unknown device"):
         select_device("tpu", said.append, task="training")
+
+
+def test_pca_output_layer_trains_in_coefficients_and_folds_into_the_papers_layer(toy, tmp_path):
+    out = tmp_path / "pca.safetensors"
+    result = train_toy(toy, out, epochs=6, output="pca", basis=6, lip_weight=1.0, velocity_weight=0.5,
+                       patience=3)
+    losses = [h["train_loss"] for h in result.history]
+    assert losses[-1] < 0.6 * losses[0]
+    bundle = load_bundle(out)
+    assert bundle.config.output_basis == 0 and bundle.model.fc_out.out_features == 600  # the paper's FC 3V
+    prov = bundle.provenance
+    assert prov["output"] == "pca" and prov["basis"] == 6 and 0.9 < prov["basis_variance"] <= 1.0
+    # the folded layer's offsets lie in the 6-dimensional basis: rank <= 6 over many frames
+    from facegen.model import one_hot
+
+    item_mel = torch.randn(1, 80, 128) * 10 - 50
+    with torch.no_grad():
+        offsets = bundle.model(item_mel, None, one_hot(0, 2))[0].reshape(80, -1)
+    centred = offsets - offsets.mean(0)
+    singular = torch.linalg.svdvals(centred.double())
+    assert singular[6] < 1e-4 * singular[0]  # float32 rounding only beyond the basis
+
+
+def test_pca_options_are_checked_before_work(toy, tmp_path):
+    with pytest.raises(FacegenError, match="need --output pca"):
+        train_toy(toy, tmp_path / "m.safetensors", lip_weight=1.0)
+    with pytest.raises(FacegenError, match="--basis 5000 needs more training frames"):
+        train_toy(toy, tmp_path / "m.safetensors", output="pca", basis=5000)
+    with pytest.raises(FacegenError, match="unknown output"):
+        train_toy(toy, tmp_path / "m.safetensors", output="half")

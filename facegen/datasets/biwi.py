@@ -5,6 +5,9 @@ Layout of a dataset folder ROOT (names as the community uses them)::
 
     ROOT/wav/{subj}_e{NN}.wav             speech
     ROOT/vertices_npy/{subj}_e{NN}.npy    motion, [T, 3V] at 25 fps (float32 or float64; [T, V, 3] accepted)
+    ROOT/curves/{subj}_e{NN}.npy          or, compactly, the rig curves of the motion [T, C] (facegen's
+                                          synthetic corpora): posed on the fly with facegen.synth.rig on the
+                                          subject's template and the regions of BIWI.ply
     ROOT/templates.pkl                    {subj: [V, 3]} neutral faces (read with a restricted unpickler)
     ROOT/templates/{subj}.ply | .npy      the same, one file per subject (these win over templates.pkl)
     ROOT/BIWI.ply                         the face list (and a neutral face: the template of trained bundles)
@@ -29,7 +32,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
 from functools import cached_property
@@ -69,6 +72,12 @@ class Sequence:
     vertices: Path
     text: Path | None = None
     alignment: Path | None = None
+    curves: Path | None = None  # rig curves instead of vertices (facegen's synthetic corpora)
+
+    @property
+    def motion(self) -> Path:
+        """The file the motion is read from: the vertices, or the rig curves."""
+        return self.curves if self.curves is not None else self.vertices
 
 
 @dataclass
@@ -80,6 +89,7 @@ class Item:
     text: np.ndarray | None  # [T, D] float32 or None
     num_frames: int
     template: np.ndarray  # [V, 3] float32, the subject's neutral face
+    pose: Callable[[np.ndarray], np.ndarray] | None = None  # rig curves [T, C] -> vertices [T, V, 3]
 
     @property
     def name(self) -> str:
@@ -90,7 +100,11 @@ class Item:
         return self.seq.subject
 
     def vertices(self) -> np.ndarray:
-        """The ground truth [T, 3V] float32, a writable copy read from the memory-mapped .npy."""
+        """The ground truth [T, 3V] float32: a writable copy read from the memory-mapped .npy, or the rig
+        curves posed on the subject's face."""
+        if self.seq.curves is not None and self.pose is not None:
+            curves = np.load(self.seq.curves)[: self.num_frames]
+            return self.pose(curves).reshape(self.num_frames, -1).astype(np.float32, copy=False)
         arr = np.load(self.seq.vertices, mmap_mode="r")
         return np.array(arr[: self.num_frames].reshape(self.num_frames, -1), dtype=np.float32)
 
@@ -105,7 +119,7 @@ class Dataset:
             raise FacegenError(f"dataset folder {self.root} does not exist: pass a folder with wav/ and "
                                "vertices_npy/ (the BIWI community layout)")
         for sub in ("wav", "vertices_npy"):
-            if not (self.root / sub).is_dir():
+            if not (self.root / sub).is_dir() and not (sub == "vertices_npy" and (self.root / "curves").is_dir()):
                 raise FacegenError(f"{self.root} has no {sub}/ folder: pass a dataset in the BIWI community "
                                    "layout (wav/, vertices_npy/, templates.pkl, BIWI.ply)")
         if on_bad not in ("skip", "fail"):
@@ -194,14 +208,16 @@ class Dataset:
                     alignment = path
                     break
         wav, npy = self.root / "wav" / f"{name}.wav", self.root / "vertices_npy" / f"{name}.npy"
-        return Sequence(name, subject, wav, npy, text if text.is_file() else None, alignment)
+        curves = self.root / "curves" / f"{name}.npy"
+        return Sequence(name, subject, wav, npy, text if text.is_file() else None, alignment,
+                        curves if curves.is_file() and not npy.is_file() else None)
 
     def sequences(self, names: Iterable[str]) -> list[Sequence]:
         """The sequences whose wav and npy files exist (others reported as bad)."""
         out = []
         for name in names:
             seq = self.sequence(name)
-            missing = [p.relative_to(self.root).as_posix() for p in (seq.wav, seq.vertices)
+            missing = [p.relative_to(self.root).as_posix() for p in (seq.wav, seq.motion)
                        if not p.is_file()]
             if missing:
                 self.bad(name, f"{' and '.join(missing)} missing")
@@ -215,6 +231,8 @@ class Dataset:
     # ------------------------------------------------------------------ per-sequence data
     def vertex_frames(self, seq: Sequence, num_vertices: int) -> int:
         """Frames of the sequence's vertex file after checking it (shape, finite values); cached by stat."""
+        if seq.curves is not None:
+            return self._curve_frames(seq)
         index = self._vertex_index
         key = stat_key(seq.vertices)
         entry = index.get(seq.name)
@@ -244,6 +262,30 @@ class Dataset:
         index[seq.name] = {"stat": key, "num_vertices": num_vertices, "frames": int(shape[0])}
         self._vertex_index_dirty = True
         return int(shape[0])
+
+    def _curve_frames(self, seq: Sequence) -> int:
+        from facegen.synth.rig import CHANNELS
+
+        try:
+            arr = np.load(seq.curves, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
+            raise BadSequence(f"{seq.curves.name} is not a readable .npy file ({exc})") from exc
+        if arr.ndim != 2 or arr.shape[1] != len(CHANNELS) or arr.shape[0] == 0 or not np.isfinite(arr).all():
+            raise BadSequence(f"{seq.curves.name} has shape {arr.shape}: not [T, {len(CHANNELS)}] finite rig curves")
+        return int(arr.shape[0])
+
+    def pose(self, subject: str) -> Callable[[np.ndarray], np.ndarray]:
+        """Rig curves -> vertices on `subject`'s face (the rig built once per subject)."""
+        if subject not in self._rigs:
+            from facegen.synth.rig import Rig
+
+            mesh = self.mesh
+            self._rigs[subject] = Rig(Mesh(self.templates[subject], mesh.faces, mesh.regions)).pose
+        return self._rigs[subject]
+
+    @cached_property
+    def _rigs(self) -> dict:
+        return {}
 
     @cached_property
     def _vertex_index(self) -> dict:
@@ -312,7 +354,8 @@ class Dataset:
             self.bad(seq.name, f"the audio lasts {audio_frames} frames but the motion {frames} frames")
             return None
         n = min(audio_frames, frames)
-        return Item(seq, mel[:n], None if text is None else text[:n], n, template)
+        pose = self.pose(seq.subject) if seq.curves is not None else None
+        return Item(seq, mel[:n], None if text is None else text[:n], n, template, pose)
 
 
 class DatasetWriter:

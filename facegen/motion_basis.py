@@ -1,0 +1,91 @@
+"""The PCA basis of the training motion, and losses computed in it (training with `--output pca`).
+
+The output layer FC 3V of the paper maps 256 decoder states to 70,110 vertex coordinates per frame; most of
+a training step's time and memory go there and to the 70,110-wide loss. Trained instead as
+offsets = B c + m, with B [3V, K] the first K principal directions of the training offsets (orthonormal
+columns) and m their mean, the layer is exactly the paper's at rank K (facegen.model: `folded`), and since
+||B (c - c*)||² = ||c - c*||², the vertex MSE is the coefficient MSE (up to the constant error of projecting
+the targets): the loss never needs the 70,110 numbers. Lip-weighted and velocity terms stay exact in K
+dimensions too (`CoefficientLoss`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from facegen.errors import FacegenError
+
+MAX_FRAMES = 6000  # frames sampled for the basis (6,000 x 70,110 float32 = 1.7 GB)
+
+
+def offsets(item) -> np.ndarray:
+    """A dataset item's motion as offsets from its subject's template, [T, 3V] float32."""
+    v = item.vertices()
+    v -= item.template.reshape(-1)
+    return v
+
+
+def fit_basis(items: Sequence, k: int, *, seed: int = 0, max_frames: int = MAX_FRAMES) -> tuple[np.ndarray,
+                                                                                                 np.ndarray, float]:
+    """(basis [3V, K] float32 with orthonormal columns, mean [3V] float32, share of the motion's variance it
+    keeps) from up to `max_frames` frames spread evenly over the training `items`."""
+    total = sum(it.num_frames for it in items)
+    if k < 1 or k > min(total, max_frames) - 1:
+        raise FacegenError(f"--basis {k} needs more training frames than there are ({total}, at most "
+                           f"{max_frames} used): choose a basis of at most {min(total, max_frames) - 1}")
+    step = max(1, int(np.ceil(total / max_frames)))
+    rng = np.random.default_rng(seed)
+    rows = []
+    for it in items:
+        o = offsets(it)
+        rows.append(o[int(rng.integers(step)) % max(1, len(o))::step])
+    x = np.concatenate(rows)[:max_frames]
+    mean = x.mean(0)
+    x -= mean
+    torch.manual_seed(seed)
+    _, s, v = torch.svd_lowrank(torch.from_numpy(x), q=min(k + 16, min(x.shape)), niter=4)
+    basis = v[:, :k].numpy().astype(np.float32)
+    total_variance = sum(float(np.dot(row, row)) for row in x)
+    kept = float((s[:k].double() ** 2).sum()) / max(total_variance, 1e-30)
+    return basis, mean.astype(np.float32), kept
+
+
+def basis_digest(basis: np.ndarray, mean: np.ndarray) -> str:
+    h = hashlib.sha256(np.ascontiguousarray(basis).tobytes())
+    h.update(np.ascontiguousarray(mean).tobytes())
+    return h.hexdigest()[:16]
+
+
+def project(item, basis: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """The item's motion in the basis: coefficients [T, K] float32."""
+    return ((offsets(item) - mean) @ basis).astype(np.float32)
+
+
+class CoefficientLoss:
+    """MSE over all vertex coordinates (+ `lip_weight` x MSE over the lip vertices' coordinates,
+    + `velocity_weight` x MSE of the frame-to-frame motion), computed exactly in the K coefficients."""
+
+    def __init__(self, basis: np.ndarray, lips: np.ndarray | None, lip_weight: float = 0.0,
+                 velocity_weight: float = 0.0, device: torch.device | str = "cpu") -> None:
+        self.coords = basis.shape[0]
+        self.lip_weight, self.velocity_weight = float(lip_weight), float(velocity_weight)
+        self.lip_basis = None
+        if self.lip_weight > 0:
+            if lips is None or len(lips) == 0:
+                raise FacegenError("--lip-weight needs the dataset's lip region (regions/lve.txt)")
+            rows = (np.asarray(lips)[:, None] * 3 + np.arange(3)[None]).reshape(-1)
+            self.lip_basis = torch.from_numpy(np.ascontiguousarray(basis[rows])).to(device)  # [3L, K]
+
+    def __call__(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """pred, target [T, K] coefficients."""
+        err = pred - target
+        loss = err.square().sum(-1).mean() / self.coords
+        if self.lip_basis is not None:
+            loss = loss + self.lip_weight * (err @ self.lip_basis.T).square().mean()
+        if self.velocity_weight > 0 and len(err) > 1:
+            loss = loss + self.velocity_weight * (err[1:] - err[:-1]).square().sum(-1).mean() / self.coords
+        return loss

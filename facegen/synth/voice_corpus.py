@@ -1,0 +1,249 @@
+"""The multi-voice speech corpus (`facegen data synth OUT --preset voices`): a corpus that teaches speech,
+not one synthesiser's voice.
+
+Every generated sentence (facegen.synth.sentences.generated_sentences: 2,400 distinct ones) is said once by
+a voice drawn from the TRAINING voices (espeak-ng variants and Festival's diphone voices) at a random rate,
+and moved by a motion style (one of the six training speakers, F2 F3 F4 M3 M4 M5) drawn independently of
+the voice, so the style one-hot cannot stand in for the voice. The test and test-unseen sentences are said
+a second time by a HELD-OUT synthesiser (Flite's clustergen voices slt, rms, awb) as sentence number
++ XVOICE_OFFSET: the cross-voice test. Festival's HTS voice is left out of both (it is trained on the same
+ARCTIC speaker as flite:slt); flite:kal/kal16 are left out of the test (the speaker of festival:kal_diphone).
+
+Per sequence {subject}_e{N}: the audio after acoustic augmentation (facegen.synth.augment: pitch, formants,
+tempo, reverb, noise, band limits, codecs, level; wav/, 16-bit PCM at 16 kHz), the motion as rig curves
+(curves/{name}.npy, float32 [T, len(CHANNELS)] — posed on the fly by the dataset reader: 12 numbers per frame
+instead of 70,110), the words and phones with their times (alignments/{name}.json, in the augmented audio's
+time), the transcript (text/) and what made it (meta/{name}.json: voice, rate, style, augmentation).
+The curves follow the synthesiser's own phone timings and the clean speech's loudness (prosody: louder
+syllables open the jaw more; facegen.synth.curves.viseme_curves). Held out from every training sentence:
+the HELD_OUT_LEXICON words (test-unseen sentences only).
+
+The root holds BIWI.ply (the neutral procedural face) with its regions, templates.pkl (each style's face),
+sentences.txt and voices.json, the manifest (parameters and finished sequences): a rerun with the same
+parameters resumes; other parameters are refused.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from facegen.atomic import atomic_path
+from facegen.errors import FacegenError
+
+VERSION = 1
+MANIFEST = "voices.json"
+RATE = 16000  # Hz of the stored audio (the model's)
+FPS = 25.0
+STYLES = ("F2", "F3", "F4", "M3", "M4", "M5")  # the motion styles: facegen.synth.corpus speakers
+XVOICE_OFFSET = 10000  # sentence number of the held-out synthesiser's take of test sentence N: N + this
+TRAIN_VOICES = ("espeak:*", "festival:kal_diphone", "festival:ked_diphone")
+TEST_VOICES = ("flite:slt", "flite:rms", "flite:awb")
+RATES = (0.85, 1.2)  # speaking rate, relative to each voice's own
+MEAN_SECONDS = 4.4  # for the disk estimate
+BYTES_PER_SECOND = RATE * 2 + 12 * 4 * FPS + 2000 / MEAN_SECONDS  # wav + curves + json
+
+
+@dataclass(frozen=True)
+class Take:
+    """One sequence to make: a sentence said by a voice, moved by a style."""
+
+    name: str
+    subject: str
+    sentence: int
+    text: str
+    voice: str
+    rate: float
+    seed: int
+    split: str
+
+
+def _voices(patterns: tuple[str, ...]) -> list[str]:
+    from facegen.synth.voices import VOICES, available_voices
+
+    installed = {v.name for v in available_voices()}
+    names = [n for p in patterns for n in VOICES if (n.startswith(p[:-1]) if p.endswith("*") else n == p)]
+    missing = [n for n in names if n not in installed]
+    if missing:
+        from facegen.synth.voices import get_voice
+
+        packages = sorted({get_voice(n).package for n in missing})
+        raise FacegenError(f"voices {', '.join(missing)} are not installed: run `make voices` or "
+                           f"`apt-get install {' '.join(packages)}` as root")
+    return names
+
+
+def plan(sentences: int = 2400, seed: int = 0, train_voices: tuple[str, ...] = TRAIN_VOICES,
+         test_voices: tuple[str, ...] = TEST_VOICES) -> list[Take]:
+    """Every take of the corpus, in a fixed order (a function of the arguments only)."""
+    from facegen.datasets.splits import sequence_name
+    from facegen.synth.sentences import generated_sentences, generated_splits
+
+    texts = generated_sentences(sentences, seed)
+    splits = generated_splits(sentences)
+    train, test = _voices(train_voices), _voices(test_voices)
+    rng = np.random.default_rng([seed, 7])
+    takes = []
+    for split, numbers in splits.items():
+        for n in numbers:
+            subject = STYLES[int(rng.integers(len(STYLES)))]
+            voice = train[int(rng.integers(len(train)))]
+            rate = float(rng.uniform(*RATES))
+            takes.append(Take(sequence_name(subject, n), subject, n, texts[n], voice, rate, n, split))
+            if split in ("test", "test-unseen"):
+                m = n + XVOICE_OFFSET
+                xvoice = test[int(rng.integers(len(test)))]
+                takes.append(Take(sequence_name(subject, m), subject, m, texts[n], xvoice, rate, m,
+                                  f"{split}-xvoice"))
+    return takes
+
+
+def estimate_bytes(takes: list[Take]) -> int:
+    return int(len(takes) * MEAN_SECONDS * BYTES_PER_SECOND)
+
+
+def _scaled(timings, scale: float) -> list[tuple[str, float, float]]:
+    return [(str(t), float(a) * scale, float(b) * scale) for t, a, b in timings]
+
+
+def _words_of(text: str, utt) -> list[tuple[str, float, float]] | None:
+    """The transcript's written words with the engine's word times (engines normalise spellings)."""
+    from facegen.words import strip_edges
+
+    written = [w for w in (strip_edges(t) for t in text.split()) if w]
+    if utt.words is None or len(utt.words) != len(written):
+        return None
+    return [(w, a, b) for w, (_, a, b) in zip(written, utt.words, strict=True)]
+
+
+def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
+    """Synthesise, augment and rig one take; write its files; return its manifest entry."""
+    from facegen.audio import num_frames, resample, write_wav
+    from facegen.synth.augment import augment
+    from facegen.synth.corpus import speaker_index
+    from facegen.synth.curves import SpeakerStyle, loudness_envelope, motion_curves
+    from facegen.synth.voices import synthesize
+
+    utt = synthesize(take.text, take.voice, rate=take.rate)
+    words = _words_of(take.text, utt)
+    if words is None or not utt.phones:
+        raise FacegenError(f"{take.voice} gave no word or phone timings for e{take.sentence}")
+    clean = resample(utt.audio, utt.sample_rate, RATE)
+    loud = loudness_envelope(clean, RATE)
+    audio, scale, applied = augment(clean, RATE, take.seed) if augmentation else (clean, 1.0, {})
+    if scale != 1.0:  # tempo: the loudness curve and every time stretch with the audio
+        loud = np.interp(np.arange(int(np.ceil(len(loud) * scale))) / scale, np.arange(len(loud)), loud)
+    words, phones = _scaled(words, scale), _scaled(utt.phones, scale)
+    frames = num_frames(len(audio) / RATE, FPS)
+    style = SpeakerStyle.for_speaker(speaker_index(take.subject))
+    curves = motion_curves(phones, [_Word(*w) for w in words], frames, FPS, style,
+                           np.random.default_rng([take.seed, 1]), alphabet=utt.alphabet, loudness=loud)
+    for folder in ("wav", "curves", "alignments", "text", "meta"):
+        (out / folder).mkdir(exist_ok=True)
+    with atomic_path(out / "wav" / f"{take.name}.wav") as tmp:
+        write_wav(audio, RATE, tmp)
+    with atomic_path(out / "curves" / f"{take.name}.npy") as tmp:
+        np.save(tmp, curves.astype(np.float32))
+    alignment = {"words": [{"word": w, "start": round(a, 4), "end": round(b, 4)} for w, a, b in words],
+                 "phones": [{"phone": p, "start": round(a, 4), "end": round(b, 4)} for p, a, b in phones],
+                 "alphabet": utt.alphabet}
+    for path, text in ((out / "alignments" / f"{take.name}.json", json.dumps(alignment)),
+                       (out / "text" / f"{take.name}.txt", take.text + "\n"),
+                       (out / "meta" / f"{take.name}.json",
+                        json.dumps({**asdict(take), "augmentation": applied, "time_scale": scale}))):
+        with atomic_path(path) as tmp:
+            tmp.write_text(text)
+    return {"name": take.name, "split": take.split, "voice": take.voice, "frames": frames}
+
+
+@dataclass
+class _Word:
+    text: str
+    start: float
+    end: float
+
+
+def _work(takes: list[Take], out: str, augmentation: bool) -> list[dict]:
+    """One worker's share (a fresh process: one BLAS thread, its own libespeak-ng)."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    done = []
+    for take in takes:
+        try:
+            done.append(make_take(take, Path(out), augmentation))
+        except FacegenError as exc:
+            done.append({"name": take.name, "split": take.split, "voice": take.voice, "error": str(exc)})
+    return done
+
+
+def _write_root(out: Path, takes: list[Take]) -> None:
+    """BIWI.ply with its regions, templates.pkl (each style's face) and sentences.txt."""
+    from facegen.datasets.biwi import DatasetWriter
+    from facegen.synth.corpus import speaker_index
+    from facegen.synth.face import make_face, speaker_face
+
+    writer = DatasetWriter(out)
+    writer.write_mesh(make_face())
+    writer.write_templates({s: speaker_face(speaker_index(s)).vertices for s in STYLES})
+    lines = sorted({(t.sentence, t.text) for t in takes})
+    with atomic_path(out / "sentences.txt") as tmp:
+        tmp.write_text("".join(f"e{n:02d} {text}\n" for n, text in lines))
+
+
+def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, workers: int = 2,
+          augmentation: bool = True, limit: int | None = None,
+          say: Callable[[str], None] = lambda _m: None) -> dict:
+    """Make (or resume) the corpus in `out`; returns the manifest. `limit` makes only the first takes of each
+    split (a small corpus for tests and trials)."""
+    import shutil
+
+    out = Path(out)
+    takes = plan(sentences, seed)
+    if limit is not None:
+        counts: dict[str, int] = {}
+        takes = [t for t in takes if counts.setdefault(t.split, 0) < limit and not counts.update(
+            {t.split: counts[t.split] + 1})]
+    params = {"version": VERSION, "sentences": sentences, "seed": seed, "augmentation": augmentation,
+              "limit": limit, "fps": FPS, "sample_rate": RATE}
+    out.mkdir(parents=True, exist_ok=True)
+    manifest_path = out / MANIFEST
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {"params": params, "done": {}}
+    if manifest["params"] != params:
+        raise FacegenError(f"{out} holds a voices corpus made with other parameters ({manifest['params']}): "
+                           "choose another folder")
+    todo = [t for t in takes if t.name not in manifest["done"]]
+    need = estimate_bytes(todo)
+    free = shutil.disk_usage(out).free
+    if need > free:
+        raise FacegenError(f"the corpus needs about {need / 1e9:.1f} GB and {out} has {free / 1e9:.1f} GB free: "
+                           "free space or pass fewer sentences")
+    if not (out / "BIWI.ply").is_file():
+        _write_root(out, takes)
+    say(f"{len(todo)} of {len(takes)} sequences to make ({need / 1e9:.2f} GB), {workers} workers")
+    chunks = [todo[i::max(1, workers * 8)] for i in range(max(1, workers * 8))]
+    start, made = time.perf_counter(), 0
+
+    def save() -> None:
+        with atomic_path(manifest_path) as tmp:
+            tmp.write_text(json.dumps(manifest, indent=0))
+
+    import multiprocessing
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(_work, chunk, str(out), augmentation) for chunk in chunks if chunk]
+        for future in as_completed(futures):
+            for entry in future.result():
+                manifest["done"][entry["name"]] = entry
+                made += 1
+            save()
+            say(f"{made}/{len(todo)} sequences ({time.perf_counter() - start:.0f} s)")
+    failed = [e for e in manifest["done"].values() if "error" in e]
+    if failed:
+        say(f"{len(failed)} takes failed (left out): {failed[0]['name']}: {failed[0]['error']}")
+    return manifest
