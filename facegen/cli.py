@@ -385,14 +385,29 @@ def import_biwi(raw, out, transcripts, regions, subjects, quiet):
 @click.argument("out", type=click.Path(file_okay=False))
 @click.option("--subjects", help="Speakers to generate, e.g. F2,F3 (default: all 14).")
 @click.option("--sentences", help="Sentences, e.g. 1-40 (default: 1-48).")
-@click.option("--preset", type=click.Choice(["paper"]),
-              help="paper: training speakers e01-e48 and test-B speakers e37-e48 only.")
+@click.option("--preset", type=click.Choice(["paper", "voices"]),
+              help="paper: training speakers e01-e48 and test-B speakers e37-e48 only; voices: the multi-voice "
+                   "corpus (24 voices of espeak-ng, Festival and Flite, augmented, 2,400 sentences; Flite held out).")
+@click.option("--limit", type=click.IntRange(min=1), help="voices: only this many sequences per split (a trial).")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--fps", default=25.0, show_default=True)
 @click.option("--workers", default=2, show_default=True)
 @click.option("--quiet", "-q", is_flag=True)
-def synth(out, subjects, sentences, preset, seed, fps, workers, quiet):
-    """Generate the synthetic speech-and-motion corpus in OUT (BIWI layout)."""
+def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
+    """Generate a synthetic speech-and-motion corpus in OUT (BIWI layout)."""
+    if preset == "voices":
+        from facegen.synth.voice_corpus import FPS, build
+
+        if subjects or sentences or fps != FPS:
+            raise FacegenError("--subjects, --sentences and --fps do not apply to --preset voices: drop them")
+        if workers < 1:
+            raise FacegenError(f"--workers {workers} must be at least 1")
+        manifest = build(out, seed=seed, workers=workers, limit=limit, say=_progress(quiet))
+        failed = sum("error" in e for e in manifest["done"].values())
+        click.echo(f"{len(manifest['done']) - failed} sequences in {out}" + (f" ({failed} failed)" if failed else ""))
+        return
+    if limit is not None:
+        raise FacegenError("--limit applies to --preset voices only: drop it")
     from facegen.synth.corpus import synthesize_corpus
 
     report = synthesize_corpus(out, subjects, sentences, preset=preset, fps=fps, seed=seed, workers=workers,

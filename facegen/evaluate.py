@@ -17,6 +17,11 @@ area 1):
   in the upper-face region (lips, jaw, chin, cheeks, …); **lip error** over the lip region.
   Frame-weighted: the mean over all frames of all sequences, like LVE.
 
+Lip sync (facegen.lipsync), when the model's face has the mouth regions (facegen's procedural face):
+aperture r (lag 0 and best lag), aperture ratio, crossed lips, bilabial closure at the p/b/m midpoints
+of the dataset's phone timings (alignments/{name}.json "phones"), stillness outside speech and the
+upper face's motion, against the ground truth; pooled over sequences by frames (by bilabials).
+
 Conditioning: sequences of a split of training subjects (train, val, test-a) are predicted with their
 own speaker's one-hot vector. Test B's subjects were never seen, so — as the paper and the community
 do — each of their sequences is predicted once for every training speaker; every (sequence, speaker)
@@ -25,6 +30,7 @@ pair counts as one sequence in the means above (per-sequence rows show the mean 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from dataclasses import dataclass
@@ -36,6 +42,7 @@ import torch
 from facegen.datasets.biwi import Dataset, Item
 from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
+from facegen.lipsync import pool_lipsync
 from facegen.runtime import Say, say_stderr, select_device, silent, warn_stderr
 
 if TYPE_CHECKING:
@@ -217,6 +224,8 @@ def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike
     num_vertices = bundle.template.num_vertices
     pooled_rows: list[dict] = []
     per_sequence: list[dict] = []
+    lip_rows: list[dict] = []
+    geometry = _lipsync_geometry(bundle)
     bar = tqdm(items, desc=f"evaluate {split}", unit="seq", disable=quiet, file=sys.stderr, leave=False)
     for item in bar:
         conditions = run.conditions(item)
@@ -226,6 +235,8 @@ def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike
             offsets, _ = run.predict(item, c)
             pred = item.template[None] + offsets
             rows.append(sequence_metrics(pred, gt, item.template, run.lips, run.upper))
+            if geometry is not None:
+                lip_rows.append(_lipsync_row(item, pred, gt, geometry, bundle.features.fps))
         pooled_rows += rows
         mean = pool(rows)
         mean["fdd"] = float(np.mean([r["fdd"] for r in rows]))
@@ -243,10 +254,39 @@ def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike
                          f"({', '.join(bundle.speakers)}), averaged" if split == "test-b"
                          else "the sequence's own speaker"),
         "metrics": {k: metrics[k] for k in ("frames",) + METRICS},
+        "lipsync": pool_lipsync(lip_rows) if lip_rows else None,
         "units": dict(UNITS),
         "per_sequence": per_sequence,
         "skipped": [list(s) for s in dataset.skipped],
     }
+
+
+def _lipsync_geometry(bundle: Bundle):
+    """The lip-sync measuring geometry of the bundle's face (None when it lacks the mouth regions)."""
+    from facegen.lipsync import FaceGeometry
+
+    try:
+        return FaceGeometry.of(bundle.template)
+    except FacegenError:
+        return None
+
+
+def _lipsync_row(item: Item, pred: np.ndarray, gt: np.ndarray, geometry, fps: float) -> dict:
+    """Lip-sync metrics of one prediction; speech frames and p/b/m midpoints from the sequence's alignment."""
+    import json
+
+    from facegen.lipsync import bilabial_midpoints, lipsync_metrics, speech_mask
+
+    speech = bilabials = None
+    if item.seq.alignment is not None and item.seq.alignment.suffix.lower() == ".json":
+        with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+            data = json.loads(item.seq.alignment.read_text(encoding="utf-8"))
+            timed = [(w["word"], w["start"], w["end"]) for w in data.get("words", [])]
+            phones = [(p["phone"], p["start"], p["end"]) for p in data.get("phones", [])]
+            speech = speech_mask(phones or timed, item.num_frames, fps) if (phones or timed) else None
+            if phones:
+                bilabials = bilabial_midpoints(phones, fps, data.get("alphabet", "cmu"))
+    return lipsync_metrics(pred, gt, geometry, fps, speech=speech, bilabials=bilabials)
 
 
 def format_table(result: dict) -> str:
@@ -265,6 +305,10 @@ def format_table(result: dict) -> str:
     units = ("LVE, FDD: squared mesh units; errors: mean L2 distance per vertex in mesh units "
              "(lower face = all vertices outside the upper-face region)")
     lines += ["-" * len(head), line("all", result["metrics"]), "", units]
+    if result.get("lipsync"):
+        from facegen.lipsync import format_lipsync
+
+        lines += ["", "lip sync (against the ground truth):", format_lipsync(result["lipsync"])]
     if result["skipped"]:
         lines.append(f"skipped {len(result['skipped'])} sequences: " +
                      ", ".join(f"{n} ({r})" for n, r in result["skipped"]))

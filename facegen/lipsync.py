@@ -265,6 +265,26 @@ def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: M
     return out
 
 
+_COUNTS = ("frames", "open_frames", "bilabials")
+_BY_BILABIALS = ("bilabial_closure_rate", "bilabial_aperture_mm", "ref_bilabial_closure_rate",
+                 "ref_bilabial_aperture_mm")
+
+
+def pool_lipsync(rows: Sequence[dict]) -> dict:
+    """The metrics of many sequences as one: counts summed; the bilabial measures weighted by each sequence's
+    bilabials, the others by its frames (sequences where a measure is undefined are left out of its mean)."""
+    out: dict = {k: int(sum(r.get(k) or 0 for r in rows)) for k in _COUNTS}
+    keys = [k for k in (rows[0] if rows else {}) if k not in _COUNTS]
+    for key in keys:
+        weight = "bilabials" if key in _BY_BILABIALS else "frames"
+        pairs = [(r[key], r.get(weight) or 0) for r in rows if r.get(key) is not None]
+        total = sum(w for _, w in pairs)
+        out[key] = float(sum(v * w for v, w in pairs) / total) if total else None
+    if out.get("aperture_best_lag") is not None:
+        out["aperture_best_lag"] = round(out["aperture_best_lag"])
+    return out
+
+
 def upper_face_response(neutral_vertices: np.ndarray, emotional_vertices: np.ndarray,
                         mesh: Mesh | FaceGeometry) -> float:
     """How much more the upper face moves for emotional words than for neutral words on the same audio:

@@ -213,10 +213,15 @@ class Dataset:
                         curves if curves.is_file() and not npy.is_file() else None)
 
     def sequences(self, names: Iterable[str]) -> list[Sequence]:
-        """The sequences whose wav and npy files exist (others reported as bad)."""
+        """The sequences whose wav and npy files exist (others reported as bad). A dataset with curves/
+        (facegen's voices corpus: each sentence said by one subject) holds any subset of subject x sentence:
+        names with no file at all are simply not in it."""
         out = []
+        sparse = (self.root / "curves").is_dir()
         for name in names:
             seq = self.sequence(name)
+            if sparse and not seq.wav.is_file() and not seq.motion.is_file():
+                continue
             missing = [p.relative_to(self.root).as_posix() for p in (seq.wav, seq.motion)
                        if not p.is_file()]
             if missing:

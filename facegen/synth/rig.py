@@ -1,4 +1,4 @@
-"""A motion rig on the procedural face, and the animation curves that drive it.
+"""A motion rig on the procedural face: channel weights [T, C] -> vertex positions (the curves: synth.curves).
 
 `Rig(mesh)` precomputes smooth per-vertex weights (falloffs of the graph distance over the mesh from
 the named regions of facegen.synth.face) and poses the face from channel weights [T, C]:

@@ -1,0 +1,101 @@
+"""The multi-voice corpus: voices drawn apart from styles, a held-out synthesiser, augmented audio, compact rig
+curves that the dataset reader poses, phone timings whose p/b/m close the lips, resumable and refusing."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from facegen.audio import FeatureConfig, load_audio, mel_filters
+from facegen.datasets.biwi import Dataset
+from facegen.errors import FacegenError
+from facegen.lipsync import FaceGeometry, aperture, bilabial_midpoints
+from facegen.synth import voice_corpus as vc
+from facegen.synth.voices import available_voices
+
+
+def _engines() -> set[str]:
+    return {v.engine for v in available_voices()}
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    if not {"espeak", "flite", "festival"} <= _engines():
+        pytest.skip("the voices corpus needs espeak-ng, Flite and Festival (make voices)")
+    out = tmp_path_factory.mktemp("voices")
+    manifest = vc.build(out, limit=1, workers=1)
+    return out, manifest
+
+
+def test_plan_draws_voices_apart_from_styles_and_holds_out_flite():
+    if not {"espeak", "flite", "festival"} <= _engines():
+        pytest.skip("needs espeak-ng, Flite and Festival (make voices)")
+    takes = vc.plan()
+    assert len({t.sentence for t in takes if t.sentence < vc.XVOICE_OFFSET}) == 2400
+    train = [t for t in takes if t.split == "train"]
+    assert all(not t.voice.startswith("flite:") for t in takes if not t.split.endswith("xvoice"))
+    assert {t.voice for t in takes if t.split.endswith("xvoice")} <= set(vc.TEST_VOICES)
+    assert len({t.voice for t in train}) >= 18 and {t.subject for t in train} == set(vc.STYLES)
+    # independence: every style hears many voices, every voice speaks for many styles
+    pairs = {(t.subject, t.voice) for t in train}
+    assert len(pairs) > 0.9 * len(vc.STYLES) * len({t.voice for t in train})
+    assert vc.plan() == takes  # deterministic
+
+
+def test_sequences_are_complete_and_consistent(corpus):
+    out, manifest = corpus
+    done = manifest["done"]
+    assert {e["split"] for e in done.values()} == {"train", "val", "test", "test-unseen", "test-xvoice",
+                                                    "test-unseen-xvoice"}
+    assert not [e for e in done.values() if "error" in e]
+    for name, entry in done.items():
+        audio, rate = load_audio(out / "wav" / f"{name}.wav")
+        curves = np.load(out / "curves" / f"{name}.npy")
+        assert rate == vc.RATE and curves.dtype == np.float32 and curves.shape == (entry["frames"], 12)
+        assert entry["frames"] == round(len(audio) / rate * vc.FPS)
+        align = json.loads((out / "alignments" / f"{name}.json").read_text())
+        text = (out / "text" / f"{name}.txt").read_text().split()
+        assert [w["word"] for w in align["words"]] == [t.strip(".,!?;:") for t in text]
+        assert align["words"][-1]["end"] <= len(audio) / rate + 0.05
+        meta = json.loads((out / "meta" / f"{name}.json").read_text())
+        assert meta["voice"] == entry["voice"] and (meta["voice"].startswith("flite:") == entry["split"].endswith("xvoice"))
+
+
+def test_the_reader_poses_the_curves_and_bilabials_close_the_lips(corpus):
+    out, manifest = corpus
+    ds = Dataset(out, warn=None)
+    seqs = ds.sequences(sorted(manifest["done"]))
+    assert len(seqs) == len(manifest["done"]) and all(s.curves is not None for s in seqs)
+    feats = FeatureConfig()
+    items = ds.load(seqs, feats, mel_filters(feats), None)
+    geo = FaceGeometry.of(ds.mesh)
+    closed = total = 0
+    for it in items:
+        v = it.vertices().reshape(it.num_frames, -1, 3)
+        assert np.abs(v - it.template).max() > 0.001  # it moves
+        align = json.loads((out / "alignments" / f"{it.name}.json").read_text())
+        mids = bilabial_midpoints([(p["phone"], p["start"], p["end"]) for p in align["phones"]], 25.0,
+                                  align["alphabet"])
+        ap = aperture(v, geo) * 10
+        closed += int((ap[mids[mids < len(ap)]] < 1.0).sum())
+        total += int((mids < len(ap)).sum())
+        assert ap.max() > 5.0  # the mouth opens several mm
+    assert total >= 3 and closed == total
+
+
+def test_rerun_resumes_and_other_parameters_are_refused(corpus):
+    out, manifest = corpus
+    again = vc.build(out, limit=1, workers=1)
+    assert again["done"] == manifest["done"]
+    with pytest.raises(FacegenError, match="other parameters"):
+        vc.build(out, limit=2, workers=1)
+
+
+def test_missing_voices_name_the_packages(monkeypatch, tmp_path):
+    import facegen.synth.voices as voices
+
+    monkeypatch.setattr(voices, "available_voices", lambda: [])
+    with pytest.raises(FacegenError, match="make voices"):
+        vc.plan()
