@@ -94,8 +94,8 @@ def test_rerun_resumes_and_other_parameters_are_refused(corpus):
 
 
 def test_missing_voices_name_the_packages(monkeypatch, tmp_path):
-    import facegen.synth.voices as voices
+    from facegen.synth import voices
 
-    monkeypatch.setattr(voices, "available_voices", lambda: [])
+    monkeypatch.setattr(voices, "available_voices", list)
     with pytest.raises(FacegenError, match="make voices"):
         vc.plan()
