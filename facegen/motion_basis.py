@@ -22,9 +22,15 @@ from facegen.errors import FacegenError
 MAX_FRAMES = 6000  # frames sampled for the basis (6,000 x 70,110 float32 = 1.7 GB)
 
 
-def offsets(item) -> np.ndarray:
-    """A dataset item's motion as offsets from its subject's template, [T, 3V] float32."""
-    v = item.vertices()
+def offsets(item, frames: slice | None = None) -> np.ndarray:
+    """A dataset item's motion (or the `frames` of it) as offsets from its subject's template, [T, 3V]
+    float32. Rig-curve sequences pose only the frames asked for."""
+    if frames is not None and item.seq.curves is not None and item.pose is not None:
+        curves = np.load(item.seq.curves)[: item.num_frames][frames]
+        v = item.pose(curves).reshape(len(curves), -1).astype(np.float32, copy=False)
+    else:
+        v = item.vertices()
+        v = v[frames] if frames is not None else v
     v -= item.template.reshape(-1)
     return v
 
@@ -41,8 +47,7 @@ def fit_basis(items: Sequence, k: int, *, seed: int = 0, max_frames: int = MAX_F
     rng = np.random.default_rng(seed)
     rows = []
     for it in items:
-        o = offsets(it)
-        rows.append(o[int(rng.integers(step)) % max(1, len(o))::step])
+        rows.append(offsets(it, slice(int(rng.integers(step)) % it.num_frames, None, step)))
     x = np.concatenate(rows)[:max_frames]
     mean = x.mean(0)
     x -= mean
