@@ -344,13 +344,13 @@ def train(
         raise FacegenError("epochs, batch size and max sequences must be at least 1 and the learning rate "
                            "positive")
     if output not in ("full", "pca"):
-        raise FacegenError(f"unknown output {output!r}: choose full (the paper's FC 3V) or pca")
+        raise FacegenError(f"unknown output layer {output!r}: choose full (the paper's FC 3V) or pca")
     if output == "pca" and basis < 1:
         raise FacegenError(f"--basis {basis} must be at least 1")
     if not (lip_weight >= 0 and velocity_weight >= 0 and math.isfinite(lip_weight + velocity_weight)):
         raise FacegenError("--lip-weight and --velocity-weight must be finite and at least 0")
     if (lip_weight or velocity_weight) and output != "pca":
-        raise FacegenError("--lip-weight and --velocity-weight need --output pca")
+        raise FacegenError("--lip-weight and --velocity-weight need --output-layer pca")
     if patience is not None and patience < 1:
         raise FacegenError(f"--patience {patience} must be at least 1")
     out_bundle = Path(out_bundle)

@@ -192,3 +192,36 @@ def test_help_is_fast_and_lists_commands():
     assert p.returncode == 0
     for cmd in ("animate", "align", "validate", "info"):
         assert cmd in p.stdout
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["data", "synth", "{d}/out", "--preset", "voices", "--subjects", "F2"], "do not apply to --preset voices"),
+    (["data", "synth", "{d}/out", "--limit", "3"], "--limit applies to --preset voices only"),
+    (["align", "{speech}", "--phones"], "--phones needs the transcript"),
+    (["align", "{speech}", "--text", "hi", "--phones", "-o", "{d}/out.csv"], "use .json or .TextGrid"),
+])
+def test_corpus_and_phone_errors_are_one_line(tmp_path, args, fragment):
+    from facegen.audio import write_wav
+    from facegen.espeak import synthesize
+
+    speech = tmp_path / "speech.wav"
+    write_wav(synthesize("hi there").audio, 22050, speech)
+    proc = run(*[a.format(d=tmp_path, speech=speech) for a in args])
+    assert_user_error(proc, fragment, tmp_path)
+    assert not (tmp_path / "out").exists()
+
+
+def test_align_phones_writes_words_and_phones(tmp_path):
+    from facegen.audio import write_wav
+    from facegen.espeak import synthesize
+
+    speech = synthesize("Please bring my map.", voice="en-us", rate=150)
+    write_wav(speech.audio, speech.sample_rate, tmp_path / "s.wav")
+    proc = run("align", tmp_path / "s.wav", "--text", "Please bring my map.", "--phones", "-o", tmp_path / "a.json")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "a.json").read_text())
+    assert [w["word"] for w in data["words"]] == ["Please", "bring", "my", "map"]
+    phones = [p["phone"] for p in data["phones"]]
+    assert phones[:3] == ["P", "L", "IY"] and phones.count("M") == 2 and "B" in phones
+    assert all(data["words"][0]["start"] <= p["start"] < p["end"] <= data["words"][-1]["end"] + 1e-6
+               for p in data["phones"])

@@ -170,9 +170,9 @@ def test_pca_output_layer_trains_in_coefficients_and_folds_into_the_papers_layer
 
 
 def test_pca_options_are_checked_before_work(toy, tmp_path):
-    with pytest.raises(FacegenError, match="need --output pca"):
+    with pytest.raises(FacegenError, match="need --output-layer pca"):
         train_toy(toy, tmp_path / "m.safetensors", lip_weight=1.0)
     with pytest.raises(FacegenError, match="--basis 5000 needs more training frames"):
         train_toy(toy, tmp_path / "m.safetensors", output="pca", basis=5000)
-    with pytest.raises(FacegenError, match="unknown output"):
+    with pytest.raises(FacegenError, match="unknown output layer"):
         train_toy(toy, tmp_path / "m.safetensors", output="half")
