@@ -134,7 +134,7 @@ def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text
         for b in range(0, len(ready), batch_size):
             ids = ready[b:b + batch_size]
             clips = [prepared[i] for i in ids]
-            states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker) for c in clips],
+            states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker, c.phones) for c in clips],
                                           device=dev)
             for i, clip, st in zip(ids, clips, states, strict=True):
                 prepared[i] = finish_animation(bundle, clip, frame_stream(bundle, st, clip.mesh.vertices))

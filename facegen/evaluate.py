@@ -145,8 +145,12 @@ class Run:
             mel = torch.from_numpy(item.mel)[None].to(dev)
             text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
             speaker = model.speaker_one_hot(condition).to(dev)
-            offsets = model(mel, text, speaker)[0].cpu().numpy()
-            enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker).items()}
+            phones = None
+            if model.cfg.n_phones:
+                phones = torch.from_numpy(self.dataset.phones(item.seq, item.num_frames,
+                                                              self.bundle.features.fps))[None].to(dev)
+            offsets = model(mel, text, speaker, phones)[0].cpu().numpy()
+            enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker, phones).items()}
                    if encoders else {})
         return offsets, enc
 

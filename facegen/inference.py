@@ -43,19 +43,20 @@ def _model_on(bundle, device):
 
 
 def decoder_states(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *, device=None,
-                   fusion_frames: int = FUSION_FRAMES):
+                   fusion_frames: int = FUSION_FRAMES, phones: np.ndarray | None = None):
     """The decoder BiLSTM's states for one clip, [T, 2 * lstm_dim] float32 torch tensor on `device`.
 
-    `mel` [T, n_mels], `text` [T, text_dim] or None (zeros when the model uses text). Equal to the states
-    of a one-pass forward: only the per-frame fusion and decoder FC run in blocks of `fusion_frames`.
+    `mel` [T, n_mels], `text` [T, text_dim] or None (zeros when the model uses text), `phones` [T, P] one-hot
+    (models with a phone stream; None: silence). Equal to the states of a one-pass forward: only the
+    per-frame fusion and decoder FC run in blocks of `fusion_frames`.
     """
-    return batch_decoder_states(bundle, [(mel, text, speaker)], device=device, fusion_frames=fusion_frames)[0]
+    return batch_decoder_states(bundle, [(mel, text, speaker, phones)], device=device,
+                                fusion_frames=fusion_frames)[0]
 
 
-def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | None, int]], *, device=None,
-                         fusion_frames: int = FUSION_FRAMES) -> list:
-    """Decoder states for several clips (mel, text, speaker): encoders per clip, the BiLSTMs over one
-    packed batch (each clip sees exactly its own frames, as alone). Returns one [T_i, H] tensor per clip."""
+def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_frames: int = FUSION_FRAMES) -> list:
+    """Decoder states for several clips (mel, text, speaker[, phones]): encoders per clip, the BiLSTMs over
+    one packed batch (each clip sees exactly its own frames, as alone). Returns one [T_i, H] tensor per clip."""
     import torch
     from torch.nn.utils.rnn import pack_sequence, unpack_sequence
 
@@ -64,8 +65,14 @@ def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | 
     cfg = model.cfg
     inputs = []
     with torch.inference_mode(), _one_thread(device.type == "cpu"):
-        for mel, text, speaker in clips:
+        for mel, text, speaker, *rest in clips:
             T = int(mel.shape[0])
+            phones_t = None
+            if cfg.n_phones:
+                phones = rest[0] if rest and rest[0] is not None else _silence(T, cfg.n_phones)
+                if phones.shape != (T, cfg.n_phones):
+                    raise ValueError(f"phones must be [{T}, {cfg.n_phones}], got {list(phones.shape)}")
+                phones_t = torch.from_numpy(np.ascontiguousarray(phones, np.float32))[None].to(device)
             mel_t = torch.from_numpy(np.ascontiguousarray(mel, np.float32))[None].to(device)
             text_t = None
             if cfg.uses_text:
@@ -75,10 +82,16 @@ def batch_decoder_states(bundle, clips: Sequence[tuple[np.ndarray, np.ndarray | 
                     raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
                 text_t = torch.from_numpy(np.ascontiguousarray(text, np.float32))[None].to(device)
             spk = model.speaker_one_hot(speaker).to(device)
-            inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames)[0])
+            inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames, phones=phones_t)[0])
         if len(inputs) == 1:
             return [model.decoder_states(inputs[0][None])[0]]
         return list(unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False))))
+
+
+def _silence(num_frames: int, num_phones: int) -> np.ndarray:
+    out = np.zeros((num_frames, num_phones), np.float32)
+    out[:, 0] = 1.0  # class 0 is silence (facegen.phones.PHONES)
+    return out
 
 
 @contextlib.contextmanager
@@ -216,9 +229,9 @@ def frame_stream(bundle, states, template: np.ndarray | None = None,
 
 
 def predict_frames(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *,
-                   template: np.ndarray | None = None, device=None,
-                   block_frames: int = BLOCK_FRAMES) -> FrameStream:
+                   template: np.ndarray | None = None, device=None, block_frames: int = BLOCK_FRAMES,
+                   phones: np.ndarray | None = None) -> FrameStream:
     """The clip's vertex positions (template + offsets; offsets alone when `template` is None) as a
     FrameStream: the decoder states are computed now, the output frames when they are read."""
-    states = decoder_states(bundle, mel, text, speaker, device=device)
+    states = decoder_states(bundle, mel, text, speaker, device=device, phones=phones)
     return frame_stream(bundle, states, template, block_frames)

@@ -70,6 +70,7 @@ class Clip:
     word_timing: str
     speaker: int
     mesh: Mesh
+    phones: np.ndarray | None = None  # [T, P] one-hot (models with a phone stream)
 
     @property
     def num_frames(self) -> int:
@@ -102,10 +103,16 @@ def prepare_clip(
 
     words: list = []
     source = "none (--no-text)"
-    text_feats = None
-    if bundle.config.uses_text and not no_text:
+    text_feats = phone_feats = None
+    if bundle.config.n_phones:
         with PROFILE.stage("alignment"):
-            words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress, warn=warn)
+            words, source, phone_feats = _words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,
+                                                           no_text=no_text, warn=warn)
+    if bundle.config.uses_text and not no_text:
+        if not bundle.config.n_phones:
+            with PROFILE.stage("alignment"):
+                words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress,
+                                          warn=warn)
         from facegen.text import check_text_dim, load_text_backend, text_features
 
         progress(f"text features ({bundle.text_backend}) for {len(words)} words")
@@ -118,7 +125,38 @@ def prepare_clip(
     progress(f"audio features and inference for {T} frames")
     with PROFILE.stage("audio_features"):
         mel = mel_features(samples, sr, cfg, bundle.mel_filters)
-    return Clip(Path(audio).name, samples, sr, mel, text_feats, words, source, spk, mesh)
+    return Clip(Path(audio).name, samples, sr, mel, text_feats, words, source, spk, mesh, phone_feats)
+
+
+def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
+                      alignment, no_text: bool, warn: Say) -> tuple[list, str, np.ndarray]:
+    """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
+    transcript, or the phones of an alignment file (facegen align --phones); silence without either."""
+    from facegen.phones import PHONES, phone_frames
+    from facegen.words import read_alignment, read_phones
+
+    if alignment is not None:
+        words = read_alignment(alignment, duration=len(samples) / sr)
+        phones = read_phones(alignment)
+        if phones is None:
+            raise FacegenError(f"this model needs phone timings but {alignment} has none: write it with "
+                               "`facegen align --phones`, or pass --text")
+        return words, "alignment file", phone_frames(phones, num_frames, fps)
+    if text is not None and not no_text:
+        from facegen.align import align_phones
+
+        if not text.strip():
+            raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
+        words, phones = align_phones(samples, sr, text)
+        return words, "forced alignment", phone_frames(phones, num_frames, fps)
+    warn("this model reads phones, which come from the transcript: without one its lips follow the audio "
+         "alone and less well (pass --text)")
+    silence = np.zeros((num_frames, len(PHONES)), np.float32)
+    silence[:, 0] = 1.0
+    if no_text:
+        return [], "none (--no-text)", silence
+    words, source = get_words(samples, sr, warn=warn)
+    return words, source, silence
 
 
 def finish_animation(bundle: Bundle, clip: Clip, vertices: np.ndarray | FrameStream) -> Animation:
@@ -180,7 +218,7 @@ def animate(
         progress(note)
     with PROFILE.stage("inference"):
         frames = predict_frames(bundle, clip.mel, clip.text_features, clip.speaker,
-                                template=clip.mesh.vertices, device=dev)
+                                template=clip.mesh.vertices, device=dev, phones=clip.phones)
         vertices = frames if stream else np.asarray(frames)
     PROFILE.mark("animate_end")
     return finish_animation(bundle, clip, vertices)

@@ -43,10 +43,12 @@ import torch
 
 from facegen.atomic import atomic_path
 from facegen.datasets.biwi import Dataset, Item
+from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
 from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig, one_hot
+from facegen.phones import PHONES
 from facegen.runtime import Say, say_stderr, select_device, silent, warn_stderr
 
 CHECKPOINT = "checkpoint.safetensors"
@@ -139,6 +141,7 @@ class Batch:
         self.device = device
 
         self.coefficients: torch.Tensor | None = None  # [T, K] targets when training in a PCA basis
+        self.phones: torch.Tensor | None = None  # [1, T, P] phone one-hot (models with a phone stream)
 
     def target(self) -> torch.Tensor:
         """Ground-truth offsets from the subject's template, [T, 3V] float32."""
@@ -148,8 +151,9 @@ class Batch:
 
     def loss(self, model: FaceModel, coefficient_loss=None) -> torch.Tensor:
         if self.coefficients is not None:
-            return coefficient_loss(model.coefficients(self.mel, self.text, self.speaker)[0], self.coefficients)
-        out = model(self.mel, self.text, self.speaker)
+            return coefficient_loss(model.coefficients(self.mel, self.text, self.speaker, self.phones)[0],
+                                    self.coefficients)
+        out = model(self.mel, self.text, self.speaker, self.phones)
         return torch.nn.functional.mse_loss(out.view(out.shape[1], -1), self.target())
 
 
@@ -319,6 +323,7 @@ def train(
     lip_weight: float = 0.0,
     velocity_weight: float = 0.0,
     patience: int | None = None,
+    phones: bool = False,
     warn: Say | None = warn_stderr,
 ) -> TrainResult:
     """Train a model on the dataset at `data_root` and write the best checkpoint as a bundle.
@@ -332,7 +337,8 @@ def train(
     `output` "full" is the paper's FC 3V; "pca" trains it in a `basis`-dimensional PCA basis of the training
     motion (facegen.motion_basis; the bundle stores the folded FC 3V), where `lip_weight` and
     `velocity_weight` add lip-vertex and frame-to-frame terms to the loss (0: the paper's MSE). `patience`
-    stops after that many epochs without a better validation loss (None: run every epoch).
+    stops after that many epochs without a better validation loss (None: run every epoch). `phones` adds the
+    phone stream (facegen.phones: per-frame phones from the dataset's alignment JSON) to the audio encoder.
     """
     say = silent if quiet else say_stderr
     warn = warn or silent
@@ -393,7 +399,8 @@ def train(
     speakers = list(splits.train_subjects)
     cfg = ModelConfig(num_vertices=mesh.num_vertices, num_speakers=len(speakers),
                       text_dim=backend.dim if backend is not None else 0, modalities=modalities,
-                      fusion=fusion, output_basis=basis if output == "pca" else 0, **(model_options or {}))
+                      fusion=fusion, output_basis=basis if output == "pca" else 0,
+                      n_phones=len(PHONES) if phones else 0, **(model_options or {}))
     coefficients, coefficient_loss, val_loss_fn = {}, None, None
     if output == "pca":
         from facegen.motion_basis import CoefficientLoss, basis_digest, fit_basis, project
@@ -467,6 +474,13 @@ def train(
         for b in train_batches + val_batches:
             if b.item.name in coefficients:
                 b.coefficients = torch.from_numpy(coefficients[b.item.name]).to(dev)
+            if phones:
+                try:
+                    b.phones = torch.from_numpy(dataset.phones(b.item.seq, b.item.num_frames, features.fps))[None]
+                except BadSequence as exc:
+                    raise FacegenError(f"{exc}: train the phone stream on a corpus with phone timings "
+                                       "(facegen data synth --preset voices)") from None
+                b.phones = b.phones.to(dev)
         say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
             f"{len(val_batches)}, {epochs} epochs, device {dev}")
         run_start = last_png = time.perf_counter()
@@ -527,7 +541,7 @@ def train(
             "batch_size": batch_size, "device": str(dev), "output": output,
             **({"basis": basis, "basis_variance": round(kept, 6), "lip_weight": lip_weight,
                 "velocity_weight": velocity_weight} if output == "pca" else {}),
-            **({"patience": patience} if patience else {})})
+            **({"patience": patience} if patience else {}), **({"phones": "per-frame CMU phones"} if phones else {})})
         from facegen.bundle import save_bundle
 
         save_bundle(bundle, out_bundle, precision=precision or ("fp16" if half else "fp32"))

@@ -200,6 +200,30 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
     return words
 
 
+def read_phones(path: str | os.PathLike) -> list[tuple[str, float, float]] | None:
+    """The phones of an alignment file, (CMU phone, start, end): the "phones" list of our JSON or the `phones`
+    tier of a TextGrid (both as `facegen align --phones` writes them); None when the file has none."""
+    path = Path(path)
+    try:
+        text = _decode_text(path.read_bytes()).lstrip()
+        if text.startswith('File type = "ooTextFile"') or path.suffix.lower() == ".textgrid":
+            from praatio.utilities.textgrid_io import parseTextgridStr
+
+            tiers = parseTextgridStr(text, includeEmptyIntervals=False)["tiers"]
+            found = [t for t in tiers if t["class"] == "IntervalTier" and t["name"].strip().lower() == "phones"]
+            return [(str(lab), float(a), float(b)) for a, b, lab in found[0]["entries"]] if found else None
+        data = json.loads(text) if text.startswith("{") else {}
+    except Exception as exc:  # praatio and json raise many types on bad files
+        raise FacegenError(f"cannot read phones from {path} ({exc}): write it with `facegen align --phones`") from exc
+    phones = data.get("phones") if isinstance(data, dict) else None
+    if phones is None:
+        return None
+    try:
+        return [(str(p["phone"]), float(p["start"]), float(p["end"])) for p in phones]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FacegenError(f"the phones of {path} are malformed ({exc}): write it with `facegen align --phones`") from exc
+
+
 def _decode_text(raw: bytes) -> str:
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # Praat writes UTF-16 when the text needs it
         return raw.decode("utf-16")

@@ -99,3 +99,40 @@ def test_missing_voices_name_the_packages(monkeypatch, tmp_path):
     monkeypatch.setattr(voices, "available_voices", list)
     with pytest.raises(FacegenError, match="make voices"):
         vc.plan()
+
+
+def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tmp_path):
+    """A model with the phone stream: trained on the corpus's phone timings; at inference its phones come
+    from pocketsphinx's phone alignment of --text, or from an alignment file that lists them."""
+    from facegen.datasets.splits import Splits
+    from facegen.pipeline import animate
+    from facegen.train import train
+    from facegen.words import Word, write_alignment
+
+    out, manifest = corpus
+    train_names = [n for n, e in manifest["done"].items() if e["split"] in ("train", "val", "test")]
+    numbers = ",".join(n.split("_e")[1] for n in train_names)
+    splits = Splits(train_subjects=vc.STYLES, test_subjects=(), train_sentences=numbers, val_sentences="1",
+                    test_sentences="2")
+    small = {"conv_channels": 16, "audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16,
+             "lstm_dim": 16}
+    result = train(out, tmp_path / "phones.safetensors", modalities="audio", epochs=2, splits=splits, device="cpu",
+                   model_options=small, quiet=True, threads=1, output="pca", basis=8, phones=True, warn=None)
+    assert result.train_sequences == 3
+    from facegen.bundle import load_bundle
+
+    bundle = load_bundle(tmp_path / "phones.safetensors")
+    assert bundle.config.n_phones == 40 and bundle.provenance["phones"]
+    name = train_names[0]
+    wav, text = out / "wav" / f"{name}.wav", (out / "text" / f"{name}.txt").read_text().strip()
+    anim = animate(wav, text=text, bundle=bundle, speaker=0)
+    assert anim.metadata["word_timing"] == "forced alignment" and np.isfinite(anim.vertices).all()
+    # the same words without phones in the file: refused with the way out
+    words = [Word(w["word"], w["start"], w["end"])
+             for w in json.loads((out / "alignments" / f"{name}.json").read_text())["words"]]
+    write_alignment(words, tmp_path / "words.json")
+    with pytest.raises(FacegenError, match="align --phones"):
+        animate(wav, alignment=tmp_path / "words.json", bundle=bundle, speaker=0)
+    notes = []
+    silent_phones = animate(wav, no_text=True, bundle=bundle, speaker=0, warn=notes.append)
+    assert any("phones" in n for n in notes) and silent_phones.vertices.shape == anim.vertices.shape

@@ -301,6 +301,20 @@ class Dataset:
             write_json(self.cache_dir / "vertices.json", self._vertex_index)
             self._vertex_index_dirty = False
 
+    def phones(self, seq: Sequence, num_frames: int, fps: float) -> np.ndarray:
+        """Per-frame phone one-hot [T, P] from the sequence's alignment JSON ("phones" with their "alphabet",
+        as facegen's voices corpus and `facegen align --phones` write them); a BadSequence without them."""
+        import json
+
+        from facegen.phones import phone_frames
+
+        try:
+            data = json.loads(seq.alignment.read_text(encoding="utf-8")) if seq.alignment else {}
+            phones = [(p["phone"], p["start"], p["end"]) for p in data["phones"]]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise BadSequence(f"no phone timings in alignments/{seq.name}.json for the phone stream") from exc
+        return phone_frames(phones, num_frames, fps, data.get("alphabet", "cmu"))
+
     def words(self, seq: Sequence, samples: np.ndarray, sr: int) -> list:
         """Word timings: the user's alignment file, else the transcript aligned once (and cached)."""
         from facegen import align
