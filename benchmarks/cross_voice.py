@@ -9,7 +9,8 @@ On a voices corpus (`facegen data synth OUT --preset voices`), for each model bu
   word over its motion with a neutral twin word at the same time on the same audio (>= 1.5 wanted).
 
 Columns: LVE (x1e-4), upper-face error (mesh units), aperture r (lag 0), median aperture ratio, bilabial
-closure, crossed lips, rest aperture (mm, non-speech frames), unseen-word upper-face response. Prints a
+closure, crossed lips, rest aperture (mm, non-speech frames), unseen-word upper-face response, and the median
+aperture on 5 s of pure noise animated with --no-text (the mouth should stay at rest: < 1.5 mm). Prints a
 Markdown table and writes it with the raw numbers to --json.
 
     python benchmarks/cross_voice.py CORPUS BUNDLE [BUNDLE ...] [--names a,b] [--limit 80] [--json out.json]
@@ -78,7 +79,27 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
             else None, "sequences": len(ratios)}
 
 
-def row(name: str, sets: dict, unseen: dict) -> str:
+def rest_on_noise(bundle_path, seconds: float = 5.0) -> float:
+    """Median lip aperture (mm) of the model on pure noise (pink-ish, -30 dBFS) animated with --no-text."""
+    import tempfile
+
+    from facegen.audio import write_wav
+    from facegen.bundle import load_bundle
+    from facegen.lipsync import FaceGeometry, aperture
+    from facegen.pipeline import animate
+
+    rng = np.random.default_rng(0)
+    noise = np.cumsum(rng.standard_normal(int(seconds * 16000))) * 0.02
+    noise = noise - np.convolve(noise, np.ones(400) / 400, mode="same")  # a soft rumble-free noise
+    noise *= 10 ** (-30 / 20) / np.sqrt(np.mean(noise ** 2))
+    bundle = load_bundle(bundle_path)
+    with tempfile.TemporaryDirectory() as tmp:
+        wav = write_wav(noise.astype(np.float32), 16000, Path(tmp) / "noise.wav")
+        anim = animate(wav, no_text=True, bundle=bundle, speaker=0)
+    return float(np.median(aperture(anim.vertices, FaceGeometry.of(bundle.template)) * 10))
+
+
+def row(name: str, sets: dict, unseen: dict, noise_mm: float) -> str:
     def fmt(v, f):
         return "-" if v is None else f.format(v)
 
@@ -89,12 +110,13 @@ def row(name: str, sets: dict, unseen: dict) -> str:
                   fmt(ls.get("aperture_median_ratio"), "{:.2f}"), fmt(ls.get("bilabial_closure_rate"), "{:.0%}"),
                   fmt(ls.get("crossed_lips_rate"), "{:.1%}"), fmt(ls.get("rest_aperture_mm"), "{:.1f}")]
     cells.append(fmt(unseen["response"], "{:.2f}"))
+    cells.append(fmt(noise_mm, "{:.1f}"))
     return "| " + " | ".join(cells) + " |"
 
 
 HEADER = ("| model | A: LVE ×1e-4 | A: upper err | A: aperture r | A: ratio | A: p/b/m closed | A: crossed | "
           "A: rest mm | X: LVE ×1e-4 | X: upper err | X: aperture r | X: ratio | X: p/b/m closed | X: crossed | "
-          "X: rest mm | unseen-word response |\n|" + "---|" * 16)
+          "X: rest mm | unseen-word response | noise: aperture mm |\n|" + "---|" * 17)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -112,8 +134,10 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         sets = {key: evaluate_set(path, args.corpus, SPLITS[key], args.limit) for key in ("test-a", "xvoice")}
         unseen = unseen_word_response(path, args.corpus, SPLITS["unseen-xvoice"], args.limit)
-        raw[name] = {"bundle": bundle, **sets, "unseen": unseen, "seconds": time.perf_counter() - start}
-        lines.append(row(name, sets, unseen))
+        noise_mm = rest_on_noise(path)
+        raw[name] = {"bundle": bundle, **sets, "unseen": unseen, "noise_aperture_mm": noise_mm,
+                     "seconds": time.perf_counter() - start}
+        lines.append(row(name, sets, unseen, noise_mm))
         print(lines[-1], flush=True)
     table = "\n".join(lines)
     print("\n" + table)

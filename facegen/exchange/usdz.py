@@ -27,18 +27,10 @@ from facegen.mesh import Mesh
 FORMAT = by_module(__name__)
 
 
-def write(
-    anim: Animation,
-    path: str | os.PathLike,
-    *,
-    mode: str = "points",
-    morph_targets: int | str | None = None,
-    tolerance: float | None = None,
-    meters_per_unit: float = usd.DEFAULT_METERS_PER_UNIT,
-    write_audio: bool = True,
-    audio_source: str | os.PathLike | None = None,
-) -> list[Path]:
-    """Write `anim` as a .usdz package: the .usdc stage (options as usd.write) with its WAV inside.
+def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True,
+          audio_source: str | os.PathLike | None = None, **usd_options) -> list[Path]:
+    """Write `anim` as a .usdz package: the .usdc stage (`usd_options` as usd.write: mode, morph_targets,
+    tolerance, meters_per_unit) with its WAV inside.
 
     Returns [path]: the package is the only file. `audio_source` is accepted for the common writer
     signature; nothing is written beside the package, so the input audio is never touched.
@@ -52,10 +44,7 @@ def write(
     folder = path.parent if str(path.parent) else Path(".")
     with atomic_path(path) as tmp, tempfile.TemporaryDirectory(prefix=f".{path.stem}.", dir=folder) as work:
         stage_file = Path(work) / f"{path.stem}.usdc"
-        usd.write(
-            anim, stage_file, mode=mode, morph_targets=morph_targets, tolerance=tolerance,
-            meters_per_unit=meters_per_unit, write_audio=write_audio,
-        )
+        usd.write(anim, stage_file, write_audio=write_audio, **usd_options)
         made = UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(stage_file)), str(tmp))
         if not made or not tmp.is_file():
             raise FacegenError(f"cannot write the USDZ package {path}: check free disk space and permissions")
