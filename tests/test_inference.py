@@ -51,9 +51,13 @@ def features(T: int, seed: int = 0, text_dim: int = 384) -> tuple[np.ndarray, np
 
 
 def one_pass(bundle, mel, text, speaker) -> np.ndarray:
+    phones = None
+    if bundle.config.n_phones:  # a model with the phone stream, fed silence (as decoder_states does by default)
+        phones = torch.zeros(1, len(mel), bundle.config.n_phones)
+        phones[..., 0] = 1.0
     with torch.inference_mode():
         out = bundle.model(torch.from_numpy(mel)[None], torch.from_numpy(text)[None],
-                           one_hot(speaker, bundle.config.num_speakers))
+                           one_hot(speaker, bundle.config.num_speakers), phones)
     return out[0].numpy()
 
 
