@@ -1,7 +1,8 @@
 """Benchmark: the small stages whose speed tests used to assert (they are not timed tests any more).
 
 Targets (2 CPU cores): rig.pose of 125 frames (5 s) on the procedural face < 1 s; MiniLM word vectors of a
-720-word transcript < 20 s; per-frame text features of 10 minutes (1,500 words, 15,000 frames) < 3 s.
+720-word transcript < 20 s; per-frame text features of 10 minutes (1,500 words, 15,000 frames) < 3 s; the 2,400 generated corpus
+sentences < 1 s.
 
     python benchmarks/bench_parts.py [--runs 3]
 """
@@ -48,6 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     spans = [Word("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, 1500), strict=True)]
     vectors = rng.normal(size=(1500, 384)).astype(np.float32)
     rows.append(("text frames, 10 min", best_of(args.runs, lambda: frame_features(spans, vectors, 15_000, 25.0)), 3.0))
+
+    from facegen.synth.sentences import generated_sentences
+
+    seeds = iter(range(100, 100 + args.runs))  # a new seed each run: nothing cached
+    rows.append(("2,400 sentences", best_of(args.runs, lambda: generated_sentences(seed=next(seeds))), 1.0))
 
     failed = 0
     for name, seconds, target in rows:
