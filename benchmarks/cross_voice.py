@@ -13,7 +13,7 @@ closure, crossed lips, rest aperture (mm, non-speech frames), unseen-word upper-
 aperture on 5 s of pure noise animated with --no-text (the mouth should stay at rest: < 1.5 mm). Prints a
 Markdown table and writes it with the raw numbers to --json.
 
-    python benchmarks/cross_voice.py CORPUS BUNDLE [BUNDLE ...] [--names a,b] [--limit 80] [--json out.json]
+    python benchmarks/cross_voice.py CORPUS BUNDLE [BUNDLE ...] [--name A --name B] [--limit 80] [--json out.json]
 """
 
 from __future__ import annotations
@@ -123,11 +123,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("corpus")
     parser.add_argument("bundles", nargs="+", help="model bundles ('default' for the built-in model)")
-    parser.add_argument("--names", help="comma-separated row names")
+    parser.add_argument("--name", action="append", help="row name of each bundle, in order (repeat it)")
     parser.add_argument("--limit", type=int, default=None, help="at most this many unseen-word sequences")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
-    names = args.names.split(",") if args.names else args.bundles
+    names = args.name or args.bundles
+    if len(names) != len(args.bundles):
+        parser.error(f"{len(names)} --name for {len(args.bundles)} bundles: give one per bundle")
     lines, raw = [HEADER], {}
     for name, bundle in zip(names, args.bundles, strict=True):
         path = None if bundle == "default" else bundle
