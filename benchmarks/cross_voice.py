@@ -72,7 +72,7 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
         emotional = item.template[None] + run.predict(item, condition)[0]
         item.text = text_features(neutral, backend, item.num_frames, bundle.features.fps)
         calm = item.template[None] + run.predict(item, condition)[0]
-        ratio = upper_face_response(calm, emotional, geo)
+        ratio = upper_face_response(calm, emotional, geo, rest_pose=item.template)
         if np.isfinite(ratio):
             ratios.append(ratio)
     return {"response": float(np.median(ratios)) if ratios else None, "mean": float(np.mean(ratios)) if ratios

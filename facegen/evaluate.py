@@ -290,7 +290,7 @@ def _lipsync_row(item: Item, pred: np.ndarray, gt: np.ndarray, geometry, fps: fl
             speech = speech_mask(phones or timed, item.num_frames, fps) if (phones or timed) else None
             if phones:
                 bilabials = bilabial_midpoints(phones, fps, data.get("alphabet", "cmu"))
-    return lipsync_metrics(pred, gt, geometry, fps, speech=speech, bilabials=bilabials)
+    return lipsync_metrics(pred, gt, geometry, fps, speech=speech, bilabials=bilabials, rest_pose=item.template)
 
 
 def format_table(result: dict) -> str:

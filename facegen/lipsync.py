@@ -166,10 +166,12 @@ def lagged_r(pred: np.ndarray, ref: np.ndarray, lag: int) -> float | None:
     return _pearson(pred[:n + lag], ref[-lag:n])
 
 
-def _upper_face(vertices: np.ndarray, geo: FaceGeometry, rms: bool = False, chunk: int = 256) -> np.ndarray:
-    """Per frame [T], in mm: the mean (or RMS) displacement of the upper-face vertices from the template
-    (`chunk` frames at a time: long animations stay within memory)."""
-    rest = geo.template[geo.upper_face].astype(np.float32)
+def _upper_face(vertices: np.ndarray, geo: FaceGeometry, rms: bool = False, chunk: int = 256,
+                rest_pose: np.ndarray | None = None) -> np.ndarray:
+    """Per frame [T], in mm: the mean (or RMS) displacement of the upper-face vertices from the rest pose (the
+    geometry's template unless `rest_pose` [V, 3] is given: a speaker's own neutral face), `chunk` frames at a
+    time (long animations stay within memory)."""
+    rest = (geo.template if rest_pose is None else np.asarray(rest_pose))[geo.upper_face].astype(np.float32)
     out = []
     for i in range(0, len(vertices), chunk):
         d = np.linalg.norm(vertices[i:i + chunk, geo.upper_face] - rest, axis=2).astype(np.float64)
@@ -187,13 +189,14 @@ def _ratio(num: float | None, den: float | None) -> float | None:
 
 def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: Mesh | FaceGeometry,
                     fps: float, *, speech: np.ndarray | None = None, bilabials: Sequence[int] | None = None,
-                    emotional: np.ndarray | None = None) -> dict:
+                    emotional: np.ndarray | None = None, rest_pose: np.ndarray | None = None) -> dict:
     """Lip-sync measures of an animation `pred_vertices` [T, V, 3] against `ref_vertices` [T, V, 3].
 
     `speech`: boolean [T] mask of speech frames (speech_mask); without it every frame counts as speech
     and the stillness and speech/non-speech measures are None. `bilabials`: frame indices of the p/b/m
     midpoints (bilabial_midpoints; frames outside [0, T) are dropped). `emotional`: the same audio
-    animated with emotional words instead of `pred`'s neutral ones, for `upper_face_response`.
+    animated with emotional words instead of `pred`'s neutral ones, for `upper_face_response`. `rest_pose`:
+    the neutral face [V, 3] the animations move from, when it is not the mesh's template (a speaker's face).
 
     Keys (None where a measure is undefined: no such frames, or a constant series):
       frames; aperture_r: Pearson r of pred and ref aperture at lag 0; aperture_best_r and
@@ -249,7 +252,7 @@ def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: M
         out[f"{prefix}bilabial_aperture_mm"] = _mean(a[mid])
 
     rest = ~speech
-    upper = _upper_face(pred, geo)
+    upper = _upper_face(pred, geo, rest_pose=rest_pose)
     out["upper_face_speech_mm"] = _mean(upper[speech])
     if speech_given:
         out["rest_aperture_mm"] = float(np.median(ap[rest])) if rest.any() else None
@@ -261,7 +264,8 @@ def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: M
     else:
         out.update(dict.fromkeys(("rest_aperture_mm", "rest_motion_mm", "upper_face_rest_mm",
                                   "upper_face_speech_ratio")))
-    out["upper_face_response"] = None if emotional is None else upper_face_response(pred, emotional, geo)
+    out["upper_face_response"] = (None if emotional is None
+                                  else upper_face_response(pred, emotional, geo, rest_pose=rest_pose))
     return out
 
 
@@ -286,13 +290,16 @@ def pool_lipsync(rows: Sequence[dict]) -> dict:
 
 
 def upper_face_response(neutral_vertices: np.ndarray, emotional_vertices: np.ndarray,
-                        mesh: Mesh | FaceGeometry) -> float:
+                        mesh: Mesh | FaceGeometry, rest_pose: np.ndarray | None = None) -> float:
     """How much more the upper face moves for emotional words than for neutral words on the same audio:
     the ratio (emotional / neutral) of the mean over frames of the RMS displacement of the upper-face
-    vertices from the template (inf when only the neutral face is still, 1 when both are: < STILL_MM)."""
+    vertices from the rest pose (the template, or `rest_pose`: the speaker's own neutral face); inf when only
+    the neutral face is still, 1 when both are (< STILL_MM)."""
     geo = FaceGeometry.of(mesh)
-    neutral = _mean(_upper_face(_frames(neutral_vertices, geo, "the neutral vertices"), geo, rms=True)) or 0.0
-    emotional = _mean(_upper_face(_frames(emotional_vertices, geo, "the emotional vertices"), geo, rms=True)) or 0.0
+    neutral = _mean(_upper_face(_frames(neutral_vertices, geo, "the neutral vertices"), geo, rms=True,
+                                rest_pose=rest_pose)) or 0.0
+    emotional = _mean(_upper_face(_frames(emotional_vertices, geo, "the emotional vertices"), geo, rms=True,
+                                  rest_pose=rest_pose)) or 0.0
     if neutral < STILL_MM:
         return 1.0 if emotional < STILL_MM else float("inf")
     return emotional / neutral
