@@ -194,7 +194,8 @@ def info(bundle, as_json):
     lines = [
         f"model bundle   {path}",
         f"format         {meta['format_version']}",
-        f"network        modalities={cfg['modalities']} fusion={cfg['fusion']} text_dim={cfg['text_dim']}",
+        f"network        modalities={cfg['modalities']} fusion={cfg['fusion']} text_dim={cfg['text_dim']}"
+        + (f" phone stream ({cfg['n_phones']} phones)" if cfg.get('n_phones') else ""),
         f"text backend   {meta['text_backend']['id']} ({meta['text_backend']['dim']}-d)",
         f"audio          {feat['n_mels']} mel bands, {feat['sample_rate']} Hz, {feat['fps']:g} fps",
         f"speakers       {', '.join(f'{i}={s}' for i, s in enumerate(meta['speakers']))}",

@@ -131,7 +131,8 @@ def prepare_clip(
 def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
                       alignment, no_text: bool, warn: Say) -> tuple[list, str, np.ndarray]:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
-    transcript, or the phones of an alignment file (facegen align --phones); silence without either."""
+    transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
+    --no-text, which only drops the text features) the phone alignment of the recognised words."""
     from facegen.phones import PHONES, phone_frames
     from facegen.words import read_alignment, read_phones
 
@@ -149,14 +150,24 @@ def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float,
             raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
         words, phones = align_phones(samples, sr, text)
         return words, "forced alignment", phone_frames(phones, num_frames, fps)
-    warn("this model reads phones, which come from the transcript: without one its lips follow the audio "
-         "alone and less well (pass --text)")
+    from facegen import align
+
     silence = np.zeros((num_frames, len(PHONES)), np.float32)
     silence[:, 0] = 1.0
-    if no_text:
-        return [], "none (--no-text)", silence
-    words, source = get_words(samples, sr, warn=warn)
-    return words, source, silence
+    # no transcript: the recogniser's words, force-aligned again for their phones
+    recognised = align.recognize(samples, sr)
+    try:
+        words, phones = align.align_phones(samples, sr, " ".join(w.text for w in recognised))
+        found = phone_frames(phones, num_frames, fps)
+    except FacegenError:
+        words, found = recognised, silence
+        warn("no phones could be found in the audio without a transcript: the lips follow the audio alone "
+             "(pass --text for better lip sync)")
+    if not no_text:
+        warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
+             "transcript; pass --text, --text-file or --alignment for better lips and upper face)")
+        return words, "speech recognition", found
+    return [], "none (--no-text)", found
 
 
 def finish_animation(bundle: Bundle, clip: Clip, vertices: np.ndarray | FrameStream) -> Animation:
