@@ -40,6 +40,7 @@ import numpy as np
 import torch
 
 from facegen.datasets.biwi import Dataset, Item
+from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
 from facegen.lipsync import pool_lipsync
@@ -147,8 +148,7 @@ class Run:
             speaker = model.speaker_one_hot(condition).to(dev)
             phones = None
             if model.cfg.n_phones:
-                phones = torch.from_numpy(self.dataset.phones(item.seq, item.num_frames,
-                                                              self.bundle.features.fps))[None].to(dev)
+                phones = torch.from_numpy(item.phones)[None].to(dev)
             offsets = model(mel, text, speaker, phones)[0].cpu().numpy()
             enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker, phones).items()}
                    if encoders else {})
@@ -205,6 +205,18 @@ def prepare(
     if items[0].template.shape[0] != num_vertices:
         raise FacegenError(f"the dataset's meshes have {items[0].template.shape[0]} vertices but the model "
                            f"{num_vertices}: evaluate on a dataset with the model's topology")
+    if cfg.n_phones:  # the phone stream: sequences without phone timings (or a transcript) are reported
+        usable = []
+        for it in items:
+            try:
+                it.phones = dataset.phones(it.seq, it.num_frames, bundle.features.fps)
+                usable.append(it)
+            except BadSequence as exc:
+                dataset.bad(it.name, str(exc))
+        items = usable
+        if not items:
+            raise FacegenError(f"no sequence of split {split} in {dataset.root} has phone timings or a transcript "
+                               "for this model's phone stream: add text/ transcripts")
     lips = _region(dataset, bundle, "lips", "lve.txt", num_vertices)
     upper = _region(dataset, bundle, "upper_face", "fdd.txt", num_vertices)
     bundle.model.to(dev).eval()

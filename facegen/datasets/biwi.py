@@ -48,6 +48,7 @@ from facegen.datasets.cache import (
     default_cache_dir,
     digest,
     read_json,
+    read_sequence_audio,
     stat_key,
     write_json,
 )
@@ -90,6 +91,7 @@ class Item:
     num_frames: int
     template: np.ndarray  # [V, 3] float32, the subject's neutral face
     pose: Callable[[np.ndarray], np.ndarray] | None = None  # rig curves [T, C] -> vertices [T, V, 3]
+    phones: np.ndarray | None = None  # [T, P] phone one-hot, set for models with a phone stream
 
     @property
     def name(self) -> str:
@@ -302,18 +304,41 @@ class Dataset:
             self._vertex_index_dirty = False
 
     def phones(self, seq: Sequence, num_frames: int, fps: float) -> np.ndarray:
-        """Per-frame phone one-hot [T, P] from the sequence's alignment JSON ("phones" with their "alphabet",
-        as facegen's voices corpus and `facegen align --phones` write them); a BadSequence without them."""
+        """Per-frame phone one-hot [T, P]: the phones of the sequence's alignment JSON (with their "alphabet",
+        as facegen's voices corpus and `facegen align --phones` write them), else pocketsphinx's phone
+        alignment of its transcript (computed once and cached); a BadSequence with neither."""
         import json
 
         from facegen.phones import phone_frames
 
-        try:
-            data = json.loads(seq.alignment.read_text(encoding="utf-8")) if seq.alignment else {}
-            phones = [(p["phone"], p["start"], p["end"]) for p in data["phones"]]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise BadSequence(f"no phone timings in alignments/{seq.name}.json for the phone stream") from exc
-        return phone_frames(phones, num_frames, fps, data.get("alphabet", "cmu"))
+        data: dict = {}
+        if seq.alignment is not None and seq.alignment.suffix.lower() == ".json":
+            with contextlib.suppress(OSError, ValueError):
+                data = json.loads(seq.alignment.read_text(encoding="utf-8"))
+        if isinstance(data, dict) and isinstance(data.get("phones"), list):
+            try:
+                phones = [(p["phone"], p["start"], p["end"]) for p in data["phones"]]
+            except (KeyError, TypeError) as exc:
+                raise BadSequence(f"alignments/{seq.name}.json has malformed phones ({exc})") from exc
+            return phone_frames(phones, num_frames, fps, data.get("alphabet", "cmu"))
+        if seq.text is None:
+            raise BadSequence(f"no phones in alignments/{seq.name}.json and no transcript text/{seq.name}.txt "
+                              "to align them from, for the phone stream")
+        key = digest([stat_key(seq.wav), stat_key(seq.text)])
+        cached = self.cache_dir / "phones" / f"{seq.name}-{key}.json"
+        if not cached.is_file():
+            from facegen import align
+            from facegen.words import write_alignment
+
+            samples, sr = read_sequence_audio(seq)
+            try:
+                words, found = align.align_phones(samples, sr, seq.text.read_text(encoding="utf-8", errors="replace"))
+            except FacegenError as exc:
+                raise BadSequence(f"its phones could not be aligned ({exc})") from exc
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            write_alignment(words, cached, phones=found)
+        phones = [(p["phone"], p["start"], p["end"]) for p in json.loads(cached.read_text())["phones"]]
+        return phone_frames(phones, num_frames, fps)
 
     def words(self, seq: Sequence, samples: np.ndarray, sr: int) -> list:
         """Word timings: the user's alignment file, else the transcript aligned once (and cached)."""
