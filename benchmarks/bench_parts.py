@@ -10,18 +10,9 @@ sentences < 1 s.
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
-
-
-def best_of(runs: int, fn) -> float:
-    times = []
-    for _ in range(runs):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
+from run import best_of  # benchmarks/run.py (this folder is on sys.path when run as a script)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -36,11 +27,11 @@ def main(argv: list[str] | None = None) -> int:
     rig = Rig(load_template())
     weights = np.random.default_rng(0).random((125, len(rig.channels))).astype(np.float32)
     rig.pose(weights[:5])
-    rows = [("rig.pose, 125 frames", best_of(args.runs, lambda: rig.pose(weights)), 1.0)]
+    rows = [("rig.pose, 125 frames", best_of(lambda: rig.pose(weights), args.runs), 1.0)]
 
     minilm = load_text_backend("minilm")
     words = ("we walked along the quiet river at dawn while the city slept " * 60).split()
-    rows.append(("MiniLM, 720 words", best_of(args.runs, lambda: minilm.word_vectors(words)), 20.0))
+    rows.append(("MiniLM, 720 words", best_of(lambda: minilm.word_vectors(words), args.runs), 20.0))
 
     rng = np.random.default_rng(1)
     starts = np.sort(rng.uniform(0, 600, 1500))
@@ -48,12 +39,12 @@ def main(argv: list[str] | None = None) -> int:
 
     spans = [Word("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, 1500), strict=True)]
     vectors = rng.normal(size=(1500, 384)).astype(np.float32)
-    rows.append(("text frames, 10 min", best_of(args.runs, lambda: frame_features(spans, vectors, 15_000, 25.0)), 3.0))
+    rows.append(("text frames, 10 min", best_of(lambda: frame_features(spans, vectors, 15_000, 25.0), args.runs), 3.0))
 
     from facegen.synth.sentences import generated_sentences
 
     seeds = iter(range(100, 100 + args.runs))  # a new seed each run: nothing cached
-    rows.append(("2,400 sentences", best_of(args.runs, lambda: generated_sentences(seed=next(seeds))), 1.0))
+    rows.append(("2,400 sentences", best_of(lambda: generated_sentences(seed=next(seeds)), args.runs), 1.0))
 
     failed = 0
     for name, seconds, target in rows:

@@ -50,7 +50,7 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
     from facegen.synth.sentences import neutral_twin
     from facegen.synth.voice_corpus import XVOICE_OFFSET
     from facegen.text import load_text_backend, text_features
-    from facegen.words import read_alignment
+    from facegen.words import Word, read_alignment, strip_edges
 
     run = prepare(bundle_path, corpus, "test-a", splits=_splits(test), quiet=True, warn=None)
     bundle = run.bundle
@@ -65,8 +65,6 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
         twin = neutral_twin(number).split()
         if len(twin) != len(words):
             continue
-        from facegen.words import Word, strip_edges
-
         neutral = [Word(strip_edges(t), w.start, w.end) for t, w in zip(twin, words, strict=True)]
         condition = run.conditions(item)[0]
         emotional = item.template[None] + run.predict(item, condition)[0]

@@ -69,7 +69,12 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_
             T = int(mel.shape[0])
             phones_t = None
             if cfg.n_phones:
-                phones = rest[0] if rest and rest[0] is not None else _silence(T, cfg.n_phones)
+                if rest and rest[0] is not None:
+                    phones = rest[0]
+                else:
+                    from facegen.phones import silence
+
+                    phones = silence(T)
                 if phones.shape != (T, cfg.n_phones):
                     raise ValueError(f"phones must be [{T}, {cfg.n_phones}], got {list(phones.shape)}")
                 phones_t = torch.from_numpy(np.ascontiguousarray(phones, np.float32))[None].to(device)
@@ -86,12 +91,6 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_
         if len(inputs) == 1:
             return [model.decoder_states(inputs[0][None])[0]]
         return list(unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False))))
-
-
-def _silence(num_frames: int, num_phones: int) -> np.ndarray:
-    out = np.zeros((num_frames, num_phones), np.float32)
-    out[:, 0] = 1.0  # class 0 is silence (facegen.phones.PHONES)
-    return out
 
 
 @contextlib.contextmanager

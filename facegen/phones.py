@@ -44,3 +44,10 @@ def phone_frames(phones: Sequence, num_frames: int, fps: float, alphabet: str = 
     out = np.zeros((num_frames, len(PHONES)), np.float32)
     out[np.arange(num_frames), ids] = 1.0
     return out
+
+
+def silence(num_frames: int) -> np.ndarray:
+    """Phone frames [num_frames, len(PHONES)] of silence only (class 0)."""
+    out = np.zeros((num_frames, len(PHONES)), np.float32)
+    out[:, 0] = 1.0
+    return out

@@ -133,7 +133,7 @@ def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float,
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
     --no-text, which only drops the text features) the phone alignment of the recognised words."""
-    from facegen.phones import PHONES, phone_frames
+    from facegen.phones import phone_frames, silence
     from facegen.words import read_alignment, read_phones
 
     if alignment is not None:
@@ -152,15 +152,13 @@ def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float,
         return words, "forced alignment", phone_frames(phones, num_frames, fps)
     from facegen import align
 
-    silence = np.zeros((num_frames, len(PHONES)), np.float32)
-    silence[:, 0] = 1.0
     # no transcript: the recogniser's words, force-aligned again for their phones
     recognised = align.recognize(samples, sr)
     try:
         words, phones = align.align_phones(samples, sr, " ".join(w.text for w in recognised))
         found = phone_frames(phones, num_frames, fps)
     except FacegenError:
-        words, found = recognised, silence
+        words, found = recognised, silence(num_frames)
         warn("no phones could be found in the audio without a transcript: the lips follow the audio alone "
              "(pass --text for better lip sync)")
     if not no_text:

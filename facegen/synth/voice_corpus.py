@@ -130,6 +130,7 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     from facegen.synth.corpus import speaker_index
     from facegen.synth.curves import SpeakerStyle, loudness_envelope, motion_curves
     from facegen.synth.voices import synthesize
+    from facegen.words import Word
 
     utt = synthesize(take.text, take.voice, rate=take.rate)
     words = _words_of(take.text, utt)
@@ -143,7 +144,7 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     words, phones = _scaled(words, scale), _scaled(utt.phones, scale)
     frames = num_frames(len(audio) / RATE, FPS)
     style = SpeakerStyle.for_speaker(speaker_index(take.subject))
-    curves = motion_curves(phones, [_Word(*w) for w in words], frames, FPS, style,
+    curves = motion_curves(phones, [Word(*w) for w in words], frames, FPS, style,
                            np.random.default_rng([take.seed, 1]), alphabet=utt.alphabet, loudness=loud)
     for folder in ("wav", "curves", "alignments", "text", "meta"):
         (out / folder).mkdir(exist_ok=True)
@@ -161,13 +162,6 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
         with atomic_path(path) as tmp:
             tmp.write_text(text)
     return {"name": take.name, "split": take.split, "voice": take.voice, "frames": frames}
-
-
-@dataclass
-class _Word:
-    text: str
-    start: float
-    end: float
 
 
 def _work(takes: list[Take], out: str, augmentation: bool) -> list[dict]:
@@ -205,10 +199,13 @@ def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, worke
 
     out = Path(out)
     takes = plan(sentences, seed)
-    if limit is not None:
-        counts: dict[str, int] = {}
-        takes = [t for t in takes if counts.setdefault(t.split, 0) < limit and not counts.update(
-            {t.split: counts[t.split] + 1})]
+    if limit is not None:  # the first `limit` takes of each split
+        kept, counts = [], {}
+        for t in takes:
+            counts[t.split] = counts.get(t.split, 0) + 1
+            if counts[t.split] <= limit:
+                kept.append(t)
+        takes = kept
     params = {"version": VERSION, "sentences": sentences, "seed": seed, "augmentation": augmentation,
               "limit": limit, "fps": FPS, "sample_rate": RATE}
     out.mkdir(parents=True, exist_ok=True)
