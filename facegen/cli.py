@@ -307,13 +307,15 @@ def _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_
 @click.option("--basis", default=64, show_default=True, help="Dimensions of the PCA basis (--output-layer pca).")
 @click.option("--lip-weight", default=0.0, show_default=True, help="Extra loss on the lip vertices (pca only).")
 @click.option("--velocity-weight", default=0.0, show_default=True, help="Loss on frame-to-frame motion (pca only).")
+@click.option("--upper-weight", default=0.0, show_default=True,
+              help="Extra loss on the upper-face vertices (pca only).")
 @click.option("--patience", type=int, help="Stop after this many epochs without a better validation loss.")
 @click.option("--phones", is_flag=True, help="Add the phone stream (per-frame phones) to the audio encoder.")
 @_split_options
 @click.option("--quiet", "-q", is_flag=True)
 def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device, resume,
-          checkpoint_dir, precision, threads, strict, output_layer, basis, lip_weight, velocity_weight, patience, phones,
-          train_subjects, test_subjects, train_sentences, val_sentences, test_sentences, quiet):
+          checkpoint_dir, precision, threads, strict, output_layer, basis, lip_weight, velocity_weight, upper_weight,
+          patience, phones, train_subjects, test_subjects, train_sentences, val_sentences, test_sentences, quiet):
     """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
     import os
 
@@ -325,7 +327,8 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
                  fusion=fusion, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, device=device,
                  resume=resume, splits=splits, checkpoint_dir=checkpoint_dir, precision=precision, threads=threads,
                  on_bad="fail" if strict else "skip", quiet=quiet, output=output_layer, basis=basis,
-                 lip_weight=lip_weight, velocity_weight=velocity_weight, patience=patience, phones=phones)
+                 lip_weight=lip_weight, velocity_weight=velocity_weight, upper_weight=upper_weight, patience=patience,
+                 phones=phones)
     click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs, "best_epoch": result.best_epoch,
                            "best_loss": result.best_loss, "seconds": round(result.seconds, 1),
                            "curves": str(result.curves_csv), "skipped": len(result.skipped)}))

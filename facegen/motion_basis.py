@@ -5,8 +5,8 @@ a training step's time and memory go there and to the 70,110-wide loss. Trained 
 offsets = B c + m, with B [3V, K] the first K principal directions of the training offsets (orthonormal
 columns) and m their mean, the layer is exactly the paper's at rank K (facegen.model: `folded`), and since
 ||B (c - c*)||² = ||c - c*||², the vertex MSE is the coefficient MSE (up to the constant error of projecting
-the targets): the loss never needs the 70,110 numbers. Lip-weighted and velocity terms stay exact in K
-dimensions too (`CoefficientLoss`).
+the targets): the loss never needs the 70,110 numbers. Lip- and upper-face-weighted and velocity terms stay
+exact in K dimensions too (`CoefficientLoss`).
 """
 
 from __future__ import annotations
@@ -72,25 +72,36 @@ def project(item, basis: np.ndarray, mean: np.ndarray) -> np.ndarray:
 
 class CoefficientLoss:
     """MSE over all vertex coordinates (+ `lip_weight` x MSE over the lip vertices' coordinates,
-    + `velocity_weight` x MSE of the frame-to-frame motion), computed exactly in the K coefficients."""
+    + `upper_weight` x MSE over the upper face's, + `velocity_weight` x MSE of the frame-to-frame motion),
+    computed exactly in the K coefficients."""
 
     def __init__(self, basis: np.ndarray, lips: np.ndarray | None, lip_weight: float = 0.0,
-                 velocity_weight: float = 0.0, device: torch.device | str = "cpu") -> None:
+                 velocity_weight: float = 0.0, device: torch.device | str = "cpu", *,
+                 upper: np.ndarray | None = None, upper_weight: float = 0.0) -> None:
         self.coords = basis.shape[0]
-        self.lip_weight, self.velocity_weight = float(lip_weight), float(velocity_weight)
-        self.lip_basis = None
-        if self.lip_weight > 0:
-            if lips is None or len(lips) == 0:
-                raise FacegenError("--lip-weight needs the dataset's lip region (regions/lve.txt)")
-            rows = (np.asarray(lips)[:, None] * 3 + np.arange(3)[None]).reshape(-1)
-            self.lip_basis = torch.from_numpy(np.ascontiguousarray(basis[rows])).to(device)  # [3L, K]
+        self.velocity_weight = float(velocity_weight)
+        self.regions = []  # (weight, basis rows of the region's coordinates)
+        if lip_weight > 0:
+            self.regions.append((float(lip_weight), _rows(basis, lips, "--lip-weight", "lip region (regions/lve.txt)",
+                                                          device)))
+        if upper_weight > 0:
+            self.regions.append((float(upper_weight), _rows(basis, upper, "--upper-weight",
+                                                            "upper-face region (regions/fdd.txt)", device)))
 
     def __call__(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """pred, target [T, K] coefficients."""
         err = pred - target
         loss = err.square().sum(-1).mean() / self.coords
-        if self.lip_basis is not None:
-            loss = loss + self.lip_weight * (err @ self.lip_basis.T).square().mean()
+        for weight, rows in self.regions:
+            loss = loss + weight * (err @ rows.T).square().mean()
         if self.velocity_weight > 0 and len(err) > 1:
             loss = loss + self.velocity_weight * (err[1:] - err[:-1]).square().sum(-1).mean() / self.coords
         return loss
+
+
+def _rows(basis: np.ndarray, vertices: np.ndarray | None, option: str, region: str, device) -> torch.Tensor:
+    """The basis rows of the region's vertex coordinates, [3R, K]."""
+    if vertices is None or len(vertices) == 0:
+        raise FacegenError(f"{option} needs the dataset's {region}")
+    rows = (np.asarray(vertices)[:, None] * 3 + np.arange(3)[None]).reshape(-1)
+    return torch.from_numpy(np.ascontiguousarray(basis[rows])).to(device)

@@ -322,6 +322,7 @@ def train(
     basis: int = 64,
     lip_weight: float = 0.0,
     velocity_weight: float = 0.0,
+    upper_weight: float = 0.0,
     patience: int | None = None,
     phones: bool = False,
     warn: Say | None = warn_stderr,
@@ -335,8 +336,8 @@ def train(
     sequences, "fail" stops at the first. `precision` (fp32, fp16, int8; see facegen.bundle) is how the
     bundle stores its weights; `half=True` is short for precision="fp16". Checkpoints are always fp32.
     `output` "full" is the paper's FC 3V; "pca" trains it in a `basis`-dimensional PCA basis of the training
-    motion (facegen.motion_basis; the bundle stores the folded FC 3V), where `lip_weight` and
-    `velocity_weight` add lip-vertex and frame-to-frame terms to the loss (0: the paper's MSE). `patience`
+    motion (facegen.motion_basis; the bundle stores the folded FC 3V), where `lip_weight`, `upper_weight` and
+    `velocity_weight` add lip-vertex, upper-face and frame-to-frame terms to the loss (0: the paper's MSE). `patience`
     stops after that many epochs without a better validation loss (None: run every epoch). `phones` adds the
     phone stream (facegen.phones: per-frame phones from the dataset's alignment JSON) to the audio encoder.
     """
@@ -353,10 +354,11 @@ def train(
         raise FacegenError(f"unknown output layer {output!r}: choose full (the paper's FC 3V) or pca")
     if output == "pca" and basis < 1:
         raise FacegenError(f"--basis {basis} must be at least 1")
-    if not (lip_weight >= 0 and velocity_weight >= 0 and math.isfinite(lip_weight + velocity_weight)):
-        raise FacegenError("--lip-weight and --velocity-weight must be finite and at least 0")
-    if (lip_weight or velocity_weight) and output != "pca":
-        raise FacegenError("--lip-weight and --velocity-weight need --output-layer pca")
+    weights = (lip_weight, upper_weight, velocity_weight)
+    if not (min(weights) >= 0 and math.isfinite(sum(weights))):
+        raise FacegenError("--lip-weight, --upper-weight and --velocity-weight must be finite and at least 0")
+    if any(weights) and output != "pca":
+        raise FacegenError("--lip-weight, --upper-weight and --velocity-weight need --output-layer pca")
     if patience is not None and patience < 1:
         raise FacegenError(f"--patience {patience} must be at least 1")
     out_bundle = Path(out_bundle)
@@ -418,14 +420,15 @@ def train(
                 coefficients[it.name] = project(it, pca, pca_mean)
                 with atomic_path(path) as tmp:
                     np.save(tmp, coefficients[it.name])
-        coefficient_loss = CoefficientLoss(pca, mesh.regions.get("lips"), lip_weight, velocity_weight, dev)
+        coefficient_loss = CoefficientLoss(pca, mesh.regions.get("lips"), lip_weight, velocity_weight, dev,
+                                           upper=mesh.regions.get("upper_face"), upper_weight=upper_weight)
         val_loss_fn = CoefficientLoss(pca, None)
     signature = {
         "model_config": cfg.to_dict(), "feature_config": features.to_dict(),
         "text_backend": backend.id if backend is not None else "none", "splits": splits.to_dict(),
         "seed": seed, "batch_size": batch_size, "train": [it.name for it in train_items],
         "val": [it.name for it in val_items], "output": output, "lip_weight": lip_weight,
-        "velocity_weight": velocity_weight,
+        "velocity_weight": velocity_weight, **({"upper_weight": upper_weight} if upper_weight else {}),
     }
 
     with torch_settings(threads):
@@ -540,7 +543,7 @@ def train(
             "train_sequences": len(train_batches), "val_sequences": len(val_batches), "seed": seed, "lr": lr,
             "batch_size": batch_size, "device": str(dev), "output": output,
             **({"basis": basis, "basis_variance": round(kept, 6), "lip_weight": lip_weight,
-                "velocity_weight": velocity_weight} if output == "pca" else {}),
+                "velocity_weight": velocity_weight, "upper_weight": upper_weight} if output == "pca" else {}),
             **({"patience": patience} if patience else {}), **({"phones": "per-frame CMU phones"} if phones else {})})
         from facegen.bundle import save_bundle
 
