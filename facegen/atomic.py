@@ -1,14 +1,33 @@
-"""Write outputs atomically: a temporary file in the target folder, renamed on success."""
+"""Write outputs atomically: a temporary file in the target folder, renamed on success.
+
+Temporary names carry a mark no user file has — `.<stem>.facegen-tmp-<host>-<pid>-<random><suffix>` — so that
+a run writing into a folder can remove what a killed run (SIGKILL, power loss) left there: files with our mark,
+this host's id and the pid of a process that no longer exists (`remove_stale_temporaries`). Other hosts'
+temporaries on a shared folder are left alone. A failure while writing removes the temporary file; a full disk
+is reported as one line (`no space left ...`), whatever the library that was writing said.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import hashlib
 import os
+import re
+import shutil
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 from facegen.errors import FacegenError
+
+TEMP_MARK = "facegen-tmp"
+HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:6]
+_STALE = re.compile(rf"{TEMP_MARK}-{HOST}-(\d+)-")
+_cleaned: set[str] = set()
+FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+LOW_SPACE = 1 << 20  # bytes: a folder with less free space than this is taken as full after a failed write
 
 
 def check_writable(target: str | os.PathLike) -> None:
@@ -23,18 +42,97 @@ def check_writable(target: str | os.PathLike) -> None:
         raise FacegenError(f"output {target} is a folder: give a file name such as {target / 'out.usda'}")
 
 
+def temp_prefix(target: str | os.PathLike) -> str:
+    """The prefix of this process's temporary names for `target` (files and folders alike)."""
+    return f".{Path(target).stem}.{TEMP_MARK}-{HOST}-{os.getpid()}-"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporaries that dead facegen processes of this host left in `folder` (once per folder and
+    process); return what was removed."""
+    folder = Path(folder)
+    key = str(folder.resolve())
+    if key in _cleaned:
+        return []
+    _cleaned.add(key)
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return []
+    for entry in entries:
+        match = _STALE.search(entry.name) if TEMP_MARK in entry.name else None
+        if match is None or int(match.group(1)) == os.getpid() or _alive(int(match.group(1))):
+            continue
+        path = Path(entry.path)
+        with contextlib.suppress(OSError):
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+            removed.append(path)
+    return removed
+
+
+def disk_full_error(target: str | os.PathLike, exc: BaseException | None, need_bytes: int = 0) -> FacegenError | None:
+    """The one-line error for a write of `target` that failed with `exc` because its disk is full (an OSError
+    with ENOSPC/EDQUOT, or any error while less than LOW_SPACE bytes are free), else None."""
+    target = Path(target)
+    folder = target.parent if str(target.parent) else Path(".")
+    full = isinstance(exc, OSError) and exc.errno in FULL_ERRNOS
+    if not full and exc is not None and not isinstance(exc, (KeyboardInterrupt, SystemExit)):
+        with contextlib.suppress(OSError):
+            full = shutil.disk_usage(folder).free < max(LOW_SPACE, need_bytes)
+    if not full:
+        return None
+    return FacegenError(f"no space left on {_device(folder)} writing {target}: need about "
+                        f"{max(1, round(need_bytes / 1e6))} MB; free some space or choose another -o folder")
+
+
+def _device(folder: Path) -> str:
+    """The mount point holding `folder` (what `df` calls the device's place)."""
+    path = folder.resolve()
+    while not os.path.ismount(path) and path != path.parent:
+        path = path.parent
+    return str(path)
+
+
+def check_space(target: str | os.PathLike, need_bytes: int) -> None:
+    """Refuse, before any work, a write of about `need_bytes` into a folder with less free space."""
+    target = Path(target)
+    folder = target.parent if str(target.parent) else Path(".")
+    with contextlib.suppress(OSError):
+        if shutil.disk_usage(folder).free < need_bytes:
+            raise disk_full_error(target, OSError(errno.ENOSPC, "full"), need_bytes)
+
+
 @contextlib.contextmanager
-def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
+def atomic_path(target: str | os.PathLike, need_bytes: int = 0) -> Iterator[Path]:
     """Yield an unused temporary path beside `target` (same suffix); rename it to `target` on success.
 
-    On any exception (or Ctrl-C) the temporary file is removed, so no partial output remains.
+    On any exception (or Ctrl-C, SIGTERM, SIGHUP: see facegen.cli) the temporary file is removed, so no partial
+    output remains; a full disk becomes one FacegenError (`need_bytes`, when known, sizes its message).
     """
     target = Path(target)
     check_writable(target)
     folder = target.parent if str(target.parent) else Path(".")
+    remove_stale_temporaries(folder)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=target.suffix, dir=folder)
     except OSError as exc:
+        full = disk_full_error(target, exc, need_bytes)
+        if full is not None:
+            raise full from exc
         raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
     os.close(fd)
     tmp_path = Path(tmp)
@@ -42,6 +140,11 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         os.replace(tmp_path, target)
-    except BaseException:
+    except BaseException as exc:
+        written = tmp_path.stat().st_size if tmp_path.is_file() else 0
         tmp_path.unlink(missing_ok=True)
+        if not isinstance(exc, FacegenError):
+            full = disk_full_error(target, exc, max(need_bytes, written))
+            if full is not None:
+                raise full from exc
         raise

@@ -426,6 +426,9 @@ def main(argv: list[str] | None = None) -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch loads OpenMP: no spinning on busy cores
     argv = sys.argv[1:] if argv is None else argv
     debug = "--debug" in argv
+    from facegen.runtime import stop_on_signals
+
+    stop_on_signals()
     try:
         cli.main(args=argv, prog_name="facegen", standalone_mode=False)
     except FacegenError as exc:
@@ -433,19 +436,30 @@ def main(argv: list[str] | None = None) -> None:
             raise
         click.echo(f"facegen: error: {exc}", err=True)
         sys.exit(2)
-    except click.exceptions.Abort:
-        click.echo("facegen: interrupted", err=True)
-        sys.exit(130)
+    except click.exceptions.Abort as exc:  # click turns KeyboardInterrupt (and Terminated) into Abort
+        _interrupted(exc.__cause__)
     except click.ClickException as exc:
         hint = f" (see 'facegen {exc.ctx.info_name} --help')" if getattr(exc, "ctx", None) else ""
         click.echo(f"facegen: error: {exc.format_message()}{hint}", err=True)
         sys.exit(exc.exit_code)
-    except KeyboardInterrupt:
-        click.echo("facegen: interrupted", err=True)
-        sys.exit(130)
+    except KeyboardInterrupt as exc:
+        _interrupted(exc)
     except Exception as exc:
         if debug:
             raise
         click.echo(f"facegen: internal error: {type(exc).__name__}: {exc} (rerun with --debug and report it)",
                    err=True)
         sys.exit(1)
+
+
+def _interrupted(exc: BaseException | None) -> None:
+    """Exit after Ctrl-C (130) or SIGTERM/SIGHUP (128 + the signal), with one line."""
+    from facegen.runtime import Terminated
+
+    if isinstance(exc, Terminated):
+        import signal
+
+        click.echo(f"facegen: stopped by {signal.Signals(exc.signum).name}", err=True)
+        sys.exit(128 + exc.signum)
+    click.echo("facegen: interrupted", err=True)
+    sys.exit(130)

@@ -134,3 +134,27 @@ def say_stderr(message: str) -> None:
 def warn_stderr(message: str) -> None:
     """The default Say for warnings: one line on stderr."""
     print(f"facegen: warning: {message}", file=sys.stderr)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised where the process is: it unwinds like Ctrl-C, so every `atomic_path` removes
+    its temporary file and no partial output remains."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def stop_on_signals() -> None:
+    """Turn SIGTERM and SIGHUP into Terminated (Python already turns SIGINT into KeyboardInterrupt)."""
+    import signal
+
+    def raise_terminated(signum, _frame):
+        raise Terminated(signum)
+
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            try:
+                signal.signal(getattr(signal, name), raise_terminated)
+            except ValueError:  # not the main thread (facegen.cli.main called from a thread): keep the default
+                return
