@@ -17,7 +17,7 @@ import numpy as np
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import CMU_CONSONANTS, CMU_VOWELS, pronounce
-from facegen.words import Word, normalize_transcript
+from facegen.words import Word, check_word_rate, normalize_transcript
 
 RATE = 16000  # pocketsphinx's en-us model
 FRAME = 0.01  # pocketsphinx frame step (s)
@@ -286,6 +286,7 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
     entries = normalize_transcript(transcript)
     if not entries:
         raise FacegenError('the transcript is empty: pass the words spoken in the audio (e.g. --text "...")')
+    check_word_rate(len(entries), len(audio) / sample_rate, "the transcript")
     audio = _pcm16k(audio, sample_rate)
     pcm = _pcm_bytes(audio)
     spoken = [(i, token) for i, (_, tokens) in enumerate(entries) for token in tokens]

@@ -170,6 +170,9 @@ def normalize_transcript(text: str) -> list[tuple[str, list[str]]]:
 # --------------------------------------------------------------------------------------------------
 # alignment files: Gentle JSON, Praat/MFA TextGrid, WhisperX JSON, plain JSON, CSV
 
+MAX_ALIGNMENT_BYTES = 64 << 20
+MAX_WORDS_PER_SECOND = 10.0  # fast speech is 4-6 words/s; auctioneers reach ~7
+MIN_WORDS_ALLOWED = 12  # a short clip may still hold a few quick words
 _PAUSE_LABELS = {"", "sil", "sp", "<eps>", "<sil>", "{sl}", "#"}
 
 
@@ -182,6 +185,10 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
     """
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size > MAX_ALIGNMENT_BYTES:
+            raise FacegenError(f"alignment {path} is {size / 1e6:.0f} MB, far more than the word timings of any "
+                               "recording: check the path")
         raw = path.read_bytes()
     except OSError as exc:
         raise FacegenError(f"cannot read alignment {path} ({exc.strerror}): check the path") from exc
@@ -193,6 +200,9 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
             words = _read_json(json.loads(text))
         else:
             words = _read_csv(text)
+    except RecursionError as exc:
+        raise FacegenError(f"alignment {path} is nested too deeply to be word timings: write it as "
+                           "Gentle/WhisperX/plain JSON, a TextGrid or a CSV with word,start,end columns") from exc
     except (ValueError, KeyError, TypeError, IndexError) as exc:  # json.JSONDecodeError is a ValueError
         raise FacegenError(f"alignment {path} is malformed ({exc}): write it as Gentle/WhisperX/plain JSON, "
                            "a TextGrid or a CSV with word,start,end columns") from exc
@@ -402,6 +412,17 @@ def _validate(words: list[Word], path: Path, duration: float | None) -> None:
     if duration is not None and words[-1].end > duration + TOLERANCE:
         raise fail(f"word {words[-1].text!r} ends at {words[-1].end:g} s, after the audio's end at "
                    f"{duration:g} s (is it the alignment of another recording?)")
+    if duration is not None:
+        check_word_rate(len(words), duration, f"alignment {path}")
+
+
+def check_word_rate(words: int, duration: float, what: str) -> None:
+    """Refuse `words` words for `duration` seconds of audio when no speech is that fast (before any work)."""
+    allowed = max(MIN_WORDS_ALLOWED, MAX_WORDS_PER_SECOND * duration)
+    if words > allowed:
+        raise FacegenError(f"{what} has {words} words for {duration:.1f} s of audio ({words / max(duration, 1e-3):.0f} "
+                           f"words/s; speech has at most about {MAX_WORDS_PER_SECOND:g}): is it the transcript of "
+                           "another recording?")
 
 
 def alignment_json(words: list[Word], phones: list[tuple[str, float, float]] | None = None) -> dict:

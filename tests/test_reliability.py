@@ -116,3 +116,81 @@ def test_signal_during_animate_leaves_nothing(tmp_path, sig):
     assert proc.returncode == 128 + sig, err.decode()
     assert err.decode().strip().splitlines()[-1] == f"facegen: stopped by {signal.Signals(sig).name}"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_templates_pkl_memory_bomb_refused_in_bounded_memory(tmp_path):
+    import pickle
+    import tracemalloc
+
+    from facegen.datasets.templates import read_templates_pkl
+
+    try:
+        from numpy._core import multiarray
+    except ImportError:  # numpy < 2
+        from numpy.core import multiarray
+
+    class Bomb:
+        def __reduce__(self):
+            return multiarray._reconstruct, (np.ndarray, (3 * 10**8,), b"f")
+
+    path = tmp_path / "templates.pkl"
+    path.write_bytes(pickle.dumps({"F1": Bomb()}, protocol=2))
+    assert path.stat().st_size < 200
+    tracemalloc.start()
+    with pytest.raises(FacegenError, match="out of nothing"):
+        read_templates_pkl(path)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 50e6
+
+
+def test_tar_member_bigger_than_any_frame_refused_before_reading(tmp_path):
+    import io
+    import tarfile
+
+    from facegen.datasets.raw import _vl_frames
+
+    path = tmp_path / "F1_e01.tgz"
+    with tarfile.open(path, "w:gz") as tar:
+        small = tarfile.TarInfo("frame_000.vl")
+        small.size = 8
+        tar.addfile(small, io.BytesIO(b"\0" * 8))
+        huge = tarfile.TarInfo("frame_001.vl")
+        huge.size = 1 << 30
+        tar.addfile(huge)  # the header only: the archive claims 1 GB that is not there
+    with pytest.raises(FacegenError, match="frame_001.vl is 1074 MB"):
+        _vl_frames(path)
+
+
+@pytest.mark.parametrize("kind", ["json", "csv"])
+def test_alignment_with_impossible_word_rate_refused(tmp_path, kind):
+    from facegen.words import read_alignment
+
+    n = 2000
+    path = tmp_path / f"words.{kind}"
+    if kind == "json":
+        import json
+
+        path.write_text(json.dumps([{"word": "la", "start": i * 0.002, "end": i * 0.002 + 0.001} for i in range(n)]))
+    else:
+        path.write_text("word,start,end\n" + "".join(f"la,{i * 0.002:.4f},{i * 0.002 + 0.001:.4f}\n" for i in range(n)))
+    with pytest.raises(FacegenError, match="2000 words for 4.4 s of audio"):
+        read_alignment(path, duration=4.4)
+    assert len(read_alignment(path, duration=400.0)) == n
+
+
+def test_transcript_with_impossible_word_rate_refused_before_aligning():
+    from facegen.align import align
+
+    audio = np.zeros(16000 * 2, np.float32)
+    with pytest.raises(FacegenError, match="the transcript has 500 words for 2.0 s"):
+        align(audio, 16000, "word " * 500)
+
+
+def test_deeply_nested_alignment_json_is_a_user_error(tmp_path):
+    from facegen.words import read_alignment
+
+    path = tmp_path / "words.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(FacegenError, match="nested too deeply"):
+        read_alignment(path, duration=4.0)

@@ -88,24 +88,42 @@ def _sentence_of(stem: str) -> tuple[bool, int] | None:
 
 
 def _vl_frames(source: Path) -> list[tuple[str, bytes]] | None:
-    """(member name, bytes) of every .vl frame in a folder or tar archive, in frame order; None if none."""
+    """(member name, bytes) of every .vl frame in a folder or tar archive, in frame order; None if none.
+    Sizes are checked (from the file system or the tar header) before anything is read."""
     frames: list[tuple[str, bytes]] = []
+    total = 0
+
+    def admit(name: str, size: int) -> None:
+        nonlocal total
+        total += size
+        if size > MAX_VL_BYTES or total > MAX_SEQUENCE_BYTES:
+            raise FacegenError(f"{source.name}: {name} is {size / 1e6:.0f} MB ({total / 1e6:.0f} MB so far), more "
+                               f"than any BIWI frame (~0.3 MB each, at most {MAX_VL_BYTES >> 20} MB) or sequence "
+                               f"(at most {MAX_SEQUENCE_BYTES >> 20} MB): check the archive")
+
     if source.is_dir():
-        frames = [(p.name, p.read_bytes()) for p in source.rglob("*")
-                  if p.suffix.lower() == ".vl" and p.is_file()]
+        for p in source.rglob("*"):
+            if p.suffix.lower() == ".vl" and p.is_file():
+                admit(p.name, p.stat().st_size)
+                frames.append((p.name, p.read_bytes()))
     else:
         try:
             with tarfile.open(source, "r:*") as tar:
                 for member in tar:
                     if member.isfile() and member.name.lower().endswith(".vl"):
+                        admit(member.name, member.size)
                         f = tar.extractfile(member)
                         if f is not None:
-                            frames.append((Path(member.name).name, f.read()))
+                            frames.append((Path(member.name).name, f.read(member.size)))
         except (tarfile.TarError, OSError, EOFError) as exc:
             raise FacegenError(f"{source.name} is not a readable tar archive ({exc})") from exc
     if not frames:
         return None
     return sorted(frames, key=lambda f: _natural_key(f[0]))
+
+
+MAX_VL_BYTES = 4 << 20  # one .vl frame: BIWI's are 23,370 x 3 float32 (~0.3 MB)
+MAX_SEQUENCE_BYTES = 768 << 20  # one sequence's frames (BIWI's longest take: ~0.1 GB)
 
 
 def _natural_key(name: str) -> list:

@@ -28,10 +28,15 @@ def _allowed_globals() -> dict[tuple[str, str], object]:
             raise pickle.UnpicklingError("_codecs.encode is allowed only for latin-1 text")
         return obj.encode("latin1")
 
+    def empty_reconstruct(subtype, shape, dtype):  # numpy pickles an empty array, then fills it from the file
+        if tuple(np.atleast_1d(shape)) != (0,):
+            raise pickle.UnpicklingError(f"it makes an array of shape {shape} out of nothing (a memory bomb?)")
+        return multiarray._reconstruct(subtype, shape, dtype)
+
     allowed: dict[tuple[str, str], object] = {("numpy", "ndarray"): np.ndarray, ("numpy", "dtype"): np.dtype,
                                               ("_codecs", "encode"): latin1_encode}
     for mod in ("numpy.core", "numpy._core"):
-        allowed[(f"{mod}.multiarray", "_reconstruct")] = multiarray._reconstruct
+        allowed[(f"{mod}.multiarray", "_reconstruct")] = empty_reconstruct
         allowed[(f"{mod}.numeric", "_frombuffer")] = numeric._frombuffer
     return allowed
 
