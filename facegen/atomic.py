@@ -38,13 +38,31 @@ def check_writable(target: str | os.PathLike) -> None:
         raise FacegenError(f"output folder {folder} does not exist: create it or choose another -o path")
     if not os.access(folder, os.W_OK):
         raise FacegenError(f"output folder {folder} is not writable: choose another -o path")
+    limit = _name_max(folder)
+    if len(os.fsencode(target.name)) > limit:
+        raise FacegenError(f"output name {target.name[:40]}... is {len(os.fsencode(target.name))} bytes long; this "
+                           f"file system allows {limit}: choose a shorter -o name")
     if target.is_dir():
         raise FacegenError(f"output {target} is a folder: give a file name such as {target / 'out.usda'}")
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _name_max(folder: Path) -> int:
+    try:
+        return os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
 def temp_prefix(target: str | os.PathLike) -> str:
-    """The prefix of this process's temporary names for `target` (files and folders alike)."""
-    return f".{Path(target).stem}.{TEMP_MARK}-{HOST}-{os.getpid()}-"
+    """The prefix of this process's temporary names for `target` (files and folders alike; the stem is cut
+    short so that a name as long as the file system allows still has a temporary name)."""
+    return f".{Path(target).stem[:64]}.{TEMP_MARK}-{HOST}-{os.getpid()}-"
 
 
 def _alive(pid: int) -> bool:
@@ -139,6 +157,8 @@ def atomic_path(target: str | os.PathLike, need_bytes: int = 0) -> Iterator[Path
     tmp_path.unlink()  # writers (pxr, soundfile, ...) create the file themselves
     try:
         yield tmp_path
+        if tmp_path.is_file():  # some writers (safetensors) create 0600 files: follow the umask like the rest
+            os.chmod(tmp_path, 0o666 & ~_umask())
         os.replace(tmp_path, target)
     except BaseException as exc:
         written = tmp_path.stat().st_size if tmp_path.is_file() else 0

@@ -185,6 +185,10 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
         cfg = ModelConfig.from_dict(meta["model_config"])
         model = FaceModel(cfg)
         state = {k[len("model."):]: v for k, v in _decompress(tensors).items() if k.startswith("model.")}
+        broken = sorted(k for k, v in state.items() if v.is_floating_point() and not torch.isfinite(v).all())
+        if broken:
+            raise FacegenError(f"model bundle {path} has NaN or infinite weights ({', '.join(broken[:3])}"
+                               f"{' ...' if len(broken) > 3 else ''}): re-train it (a lower --lr) or re-export it")
         model.load_state_dict(state)
         regions = {k[len("region."):]: v.numpy() for k, v in tensors.items() if k.startswith("region.")}
         template = Mesh(tensors["template.vertices"].numpy(), tensors["template.faces"].numpy(), regions)

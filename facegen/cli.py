@@ -23,6 +23,17 @@ def _progress(quiet: bool):
     return lambda msg: click.echo(f"facegen: {msg}", err=True)
 
 
+def _protect_inputs(outputs: list, **inputs) -> None:
+    """Refuse an output path that names one of the command's input files (it would be overwritten)."""
+    from facegen.exchange.wav import is_same_file
+
+    for out in outputs:
+        for name, path in inputs.items():
+            if out and path and (Path(out).resolve() == Path(path).resolve() or is_same_file(path, out)):
+                raise FacegenError(f"{out} is the {name} file this command reads: writing it would destroy an "
+                                   "input; choose another output name")
+
+
 def _read_text(text: str | None, text_file: str | None) -> str | None:
     if text_file is None:
         return text
@@ -44,6 +55,23 @@ def _one_of(**options) -> None:
         names = " and ".join("--" + k.replace("_", "-") for k in given)
         raise FacegenError(f"{names} cannot be used together: give only one source of words")
 
+
+
+
+class _FiniteRange(click.FloatRange):
+    """A float range that also refuses nan and inf (click's FloatRange lets nan through)."""
+
+    def convert(self, value, param, ctx):
+        import math
+
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{number} is not a finite number", param, ctx)
+        return number
+
+
+FPS = _FiniteRange(0, 1000, min_open=True)
+WEIGHT = _FiniteRange(0, 1e6)
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="facegen")
@@ -71,7 +99,7 @@ def cli(debug: bool) -> None:
 @click.option("--morph-targets", metavar="K|all", callback=_morph_targets,
               help="glTF / USD blendshapes: number of PCA morph targets (default: as many as the tolerance "
                    "needs), or 'all' for one per frame (short clips).")
-@click.option("--tolerance", type=float,
+@click.option("--tolerance", type=_FiniteRange(0, 1, min_open=True),
               help="glTF / USD blendshapes: largest vertex error allowed, as a fraction of the face size "
                    "(default 1e-3).")
 @click.option("--preview", type=click.Path(dir_okay=False), help="Also render a preview video (.mp4) with sound.")
@@ -88,6 +116,8 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
     check_writable(output)
+    _protect_inputs([output, Path(output).with_suffix(".wav"), preview], transcript=text_file,
+                    alignment=alignment, model=model, template=template)
     options = {k: v for k, v in (("mode", usd_mode), ("morph_targets", morph_targets), ("tolerance", tolerance))
                if v is not None}
     check_write_options(output, options)
@@ -119,11 +149,11 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
               help="Another animation (ground truth or another model) shown beside IN with an error heat map.")
 @click.option("--model", "-m", type=click.Path(dir_okay=False), help="Bundle whose template a .npy IN uses.")
 @click.option("--template", type=click.Path(dir_okay=False), help="Template mesh (PLY/OBJ) for a .npy IN.")
-@click.option("--fps", type=float, help="Frame rate of a .npy IN (default 25).")
-@click.option("--size", default=512, show_default=True, help="Pixels per view (square).")
+@click.option("--fps", type=FPS, help="Frame rate of a .npy IN (default 25).")
+@click.option("--size", type=click.IntRange(16, 8192), default=512, show_default=True, help="Pixels per view (square).")
 @click.option("--views", default="front,three_quarter", show_default=True,
               help="Comma-separated views: front, three_quarter, profile.")
-@click.option("--error-scale", type=float, help="Fix the heat map's top value (model units) across videos.")
+@click.option("--error-scale", type=_FiniteRange(0, min_open=True), help="Fix the heat map's top value (model units) across videos.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def render(input_file, output, compare, model, template, fps, size, views, error_scale, quiet):
     """Render an animation file IN to a preview video with its sound."""
@@ -158,6 +188,7 @@ def align(audio, text, text_file, output, phones):
     from facegen.words import alignment_json, write_alignment
 
     _one_of(text=text, text_file=text_file)
+    _protect_inputs([output], audio=audio, transcript=text_file)
     if output and Path(output).suffix.lower() not in (".json", ".textgrid"):
         raise FacegenError(f"cannot write alignments as {Path(output).suffix or 'no extension'}: use .json or .TextGrid")
     samples, sr = load_audio(audio)
@@ -213,7 +244,7 @@ def info(bundle, as_json):
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--model", "-m", type=click.Path(dir_okay=False), help="Check against this bundle's template.")
 @click.option("--template", type=click.Path(dir_okay=False), help="Check against this mesh (PLY/OBJ).")
-@click.option("--fps", type=float, help="The frame rate the file must have.")
+@click.option("--fps", type=FPS, help="The frame rate the file must have.")
 @click.option("--audio", "audio_path", type=click.Path(dir_okay=False),
               help="The audio the animation must match (default: the file's own/sidecar audio).")
 @click.option("--no-audio-required", is_flag=True, help="Do not fail when no audio is attached.")
@@ -248,7 +279,7 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
 @click.option("--model", "-m", type=click.Path(dir_okay=False), help="Model bundle (default: the built-in model).")
 @click.option("--text-model", help="Local folder (or cached id) of the text model.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-@click.option("--batch-size", type=int, default=16, show_default=True, help="Clips run through the network at once.")
+@click.option("--batch-size", type=click.IntRange(min=1), default=16, show_default=True, help="Clips run through the network at once.")
 @click.option("--ext", default=".usdc", show_default=True, help="Output format for rows without an output.")
 @click.option("--quiet", "-q", is_flag=True)
 def batch(manifest, output_dir, model, text_model, device, batch_size, ext, quiet):
@@ -291,25 +322,25 @@ def _splits(train_subjects, test_subjects, train_sentences, val_sentences, test_
 @click.option("--text-model", type=click.Path(), help="Local folder with the text model's weights.")
 @click.option("--modalities", type=click.Choice(["both", "audio", "text"]), default="both", show_default=True)
 @click.option("--fusion", type=click.Choice(["tensor", "concat"]), default="tensor", show_default=True)
-@click.option("--epochs", default=100, show_default=True)
-@click.option("--lr", default=1e-4, show_default=True)
-@click.option("--batch-size", default=1, show_default=True)
+@click.option("--epochs", type=click.IntRange(min=1), default=100, show_default=True)
+@click.option("--lr", type=_FiniteRange(0, 10, min_open=True), default=1e-4, show_default=True)
+@click.option("--batch-size", type=click.IntRange(min=1), default=1, show_default=True)
 @click.option("--seed", default=0, show_default=True)
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--resume", is_flag=True, help="Continue from the last checkpoint (after a kill or with more epochs).")
 @click.option("--checkpoint-dir", type=click.Path(file_okay=False), help="Default: OUTPUT's name + '.ckpt/'.")
 @click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default="fp32", show_default=True,
               help="How the bundle stores its weights.")
-@click.option("--threads", type=int, help="CPU threads for torch (default: all cores).")
+@click.option("--threads", type=click.IntRange(1, 1024), help="CPU threads for torch (default: all cores).")
 @click.option("--strict", is_flag=True, help="Refuse to train when a sequence is missing or corrupt (default: skip it).")
 @click.option("--output-layer", "output_layer", type=click.Choice(["full", "pca"]), default="full", show_default=True,
               help="full: the paper's FC 3V; pca: the same layer trained in a PCA basis of the training motion.")
-@click.option("--basis", default=64, show_default=True, help="Dimensions of the PCA basis (--output-layer pca).")
-@click.option("--lip-weight", default=0.0, show_default=True, help="Extra loss on the lip vertices (pca only).")
-@click.option("--velocity-weight", default=0.0, show_default=True, help="Loss on frame-to-frame motion (pca only).")
-@click.option("--upper-weight", default=0.0, show_default=True,
+@click.option("--basis", type=click.IntRange(min=1), default=64, show_default=True, help="Dimensions of the PCA basis (--output-layer pca).")
+@click.option("--lip-weight", type=WEIGHT, default=0.0, show_default=True, help="Extra loss on the lip vertices (pca only).")
+@click.option("--velocity-weight", type=WEIGHT, default=0.0, show_default=True, help="Loss on frame-to-frame motion (pca only).")
+@click.option("--upper-weight", type=WEIGHT, default=0.0, show_default=True,
               help="Extra loss on the upper-face vertices (pca only).")
-@click.option("--patience", type=int, help="Stop after this many epochs without a better validation loss.")
+@click.option("--patience", type=click.IntRange(min=1), help="Stop after this many epochs without a better validation loss.")
 @click.option("--phones", is_flag=True, help="Add the phone stream (per-frame phones) to the audio encoder.")
 @_split_options
 @click.option("--quiet", "-q", is_flag=True)
@@ -395,8 +426,8 @@ def import_biwi(raw, out, transcripts, regions, subjects, quiet):
                    "corpus (24 voices of espeak-ng, Festival and Flite, augmented, 2,400 sentences; Flite held out).")
 @click.option("--limit", type=click.IntRange(min=1), help="voices: only this many sequences per split (a trial).")
 @click.option("--seed", default=0, show_default=True)
-@click.option("--fps", default=25.0, show_default=True)
-@click.option("--workers", default=2, show_default=True)
+@click.option("--fps", type=FPS, default=25.0, show_default=True)
+@click.option("--workers", type=click.IntRange(1, 256), default=2, show_default=True)
 @click.option("--quiet", "-q", is_flag=True)
 def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
     """Generate a synthetic speech-and-motion corpus in OUT (BIWI layout)."""
@@ -439,7 +470,7 @@ def main(argv: list[str] | None = None) -> None:
     except click.exceptions.Abort as exc:  # click turns KeyboardInterrupt (and Terminated) into Abort
         _interrupted(exc.__cause__)
     except click.ClickException as exc:
-        hint = f" (see 'facegen {exc.ctx.info_name} --help')" if getattr(exc, "ctx", None) else ""
+        hint = f" (see '{exc.ctx.command_path} --help')" if getattr(exc, "ctx", None) else ""
         click.echo(f"facegen: error: {exc.format_message()}{hint}", err=True)
         sys.exit(exc.exit_code)
     except KeyboardInterrupt as exc:

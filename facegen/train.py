@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from facegen.atomic import atomic_path
+from facegen.atomic import atomic_path, check_writable
 from facegen.datasets.biwi import Dataset, Item
 from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits
@@ -362,11 +362,17 @@ def train(
     if patience is not None and patience < 1:
         raise FacegenError(f"--patience {patience} must be at least 1")
     out_bundle = Path(out_bundle)
-    if not out_bundle.parent.is_dir() and str(out_bundle.parent):
-        raise FacegenError(f"output folder {out_bundle.parent} does not exist: create it or choose another "
-                           "-o path")
+    if out_bundle.suffix.lower() != ".safetensors":
+        given = out_bundle.suffix or "a name without extension"
+        raise FacegenError(f"a model bundle is a .safetensors file, not {given}: use -o "
+                           f"{out_bundle.with_suffix('.safetensors').name}")
+    check_writable(out_bundle)  # before hours of training, not after
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else default_checkpoint_dir(out_bundle)
     ckpt_path = ckpt_dir / CHECKPOINT
+    existing = next(p for p in (ckpt_dir.absolute(), *ckpt_dir.absolute().parents) if p.exists())
+    if not existing.is_dir() or not os.access(existing, os.W_OK):
+        raise FacegenError(f"cannot write the checkpoint folder {ckpt_dir} ({existing} is not a writable folder): "
+                           "pass --checkpoint-dir to a writable folder")
     dev = select_device(device, say, task="training")
     splits = splits or Splits()
 

@@ -194,3 +194,23 @@ def test_deeply_nested_alignment_json_is_a_user_error(tmp_path):
     path.write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(FacegenError, match="nested too deeply"):
         read_alignment(path, duration=4.0)
+
+
+def test_outputs_follow_the_umask_even_when_the_writer_makes_0600_files(tmp_path):
+    target = tmp_path / "m.safetensors"
+    old = os.umask(0o022)
+    try:
+        with atomic.atomic_path(target) as tmp:
+            fd = os.open(tmp, os.O_CREAT | os.O_WRONLY, 0o600)
+            os.close(fd)
+    finally:
+        os.umask(old)
+    assert target.stat().st_mode & 0o777 == 0o644
+
+
+def test_overlong_output_name_is_one_line(tmp_path):
+    with pytest.raises(FacegenError, match="bytes long; this file system allows"):
+        atomic.check_writable(tmp_path / ("a" * 300 + ".usdc"))
+    with atomic.atomic_path(tmp_path / ("b" * 240 + ".npy")) as tmp:  # the longest names still get a temporary
+        np.save(tmp, np.zeros(1))
+    assert (tmp_path / ("b" * 240 + ".npy")).is_file()

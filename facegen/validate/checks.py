@@ -88,11 +88,12 @@ def check_values(
         if d > worst:
             worst, worst_frame = d, i
     share = f"{worst / size:.1%}" if size > 0 else "n/a"
+    unmeasured = f"; {len(bad_frames)} frames with NaN/inf coordinates could not be measured" if bad_frames else ""
     report.add(
         "displacement",
-        worst <= bound,
+        worst <= bound and not bad_frames,
         f"largest vertex offset {worst:.4g} (frame {worst_frame}) = {share} of the face size "
-        f"{size:.4g}; bound {max_displacement:.0%}",
+        f"{size:.4g}; bound {max_displacement:.0%}{unmeasured}",
     )
 
 
