@@ -330,7 +330,7 @@ def _apply_weights(arkit, path: Path, target, fps: float | None, scene) -> tuple
                              f"pass the character as target (objects: {_names(scene.objects)})")
     else:
         objects = []
-        for item in [target] if isinstance(target, str) or not hasattr(target, "__iter__") else target:
+        for item in target if isinstance(target, list | tuple) else [target]:
             obj = bpy.data.objects.get(item) if isinstance(item, str) else item
             if obj is None:
                 raise ValueError(f"no object named {item!r}: the objects are {_names(bpy.data.objects)}")
