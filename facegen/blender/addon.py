@@ -11,31 +11,43 @@ from .facegen_import import import_file
 
 
 class FACEGEN_OT_import(bpy.types.Operator, ImportHelper):
-    """Import a facegen animation with its frame rate, frame range and sound"""
+    """Import a facegen animation with its frame rate, frame range and sound, or key ARKit weights (.json,
+    .csv) onto a character's shape keys"""
 
     bl_idname = "facegen.import_animation"
     bl_label = "Import facegen animation"
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012 (Blender reads it as a set)
 
-    filter_glob: StringProperty(default="*.glb;*.gltf;*.usd;*.usda;*.usdc;*.usdz", options={"HIDDEN"})
+    filter_glob: StringProperty(default="*.glb;*.gltf;*.usd;*.usda;*.usdc;*.usdz;*.json;*.csv", options={"HIDDEN"})
+    target: StringProperty(name="Target", description="ARKit weights (.json/.csv): the object whose ARKit-named "
+                           "shape keys get them (empty: the active object)", default="")
     fps: FloatProperty(name="FPS", description="Frame rate when the file states none (0: the file's)",
                        default=0.0, min=0.0)
-    sound: BoolProperty(name="Sound strip", description="Add the WAV beside the file as a sound strip",
-                        default=True)
+    sound: BoolProperty(name="Sound strip", description="Add the clip's sound (the WAV beside the file, else the "
+                        "one inside it) as a sound strip", default=True)
 
     def execute(self, context):
+        target = None
+        if self.filepath.lower().endswith((".json", ".csv")):
+            target = self.target or (context.active_object.name if context.active_object else None)
         try:
-            done = import_file(self.filepath, fps=self.fps or None, sound=self.sound, scene=context.scene)
+            done = import_file(self.filepath, fps=self.fps or None, sound=self.sound, scene=context.scene,
+                               target=target)
         except (OSError, RuntimeError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        for line in done["warnings"]:
+            self.report({"WARNING"}, line)
+        if done.get("unmatched"):
+            self.report({"WARNING"}, f"no shape key for {len(done['unmatched'])} ARKit shapes: "
+                        + ", ".join(done["unmatched"]))
         self.report({"INFO"}, f"facegen: {done['frames']} frames at {done['fps']:g} fps"
                     + (", with sound" if done["sound"] else ""))
         return {"FINISHED"}
 
 
 def _menu(self, context) -> None:
-    self.layout.operator(FACEGEN_OT_import.bl_idname, text="facegen animation (.glb/.gltf/.usd*)")
+    self.layout.operator(FACEGEN_OT_import.bl_idname, text="facegen animation (.glb/.gltf/.usd*/.json/.csv)")
 
 
 def register() -> None:

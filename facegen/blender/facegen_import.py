@@ -1,18 +1,25 @@
 """Import a facegen animation (.usd/.usda/.usdc/.usdz, .glb/.gltf) into Blender, with what Blender's
-importers leave out: the scene's frame rate, the frame range 0..T-1 and the sound strip of the clip.
+importers leave out: the scene's frame rate, the frame range 0..T-1 and the sound strip of the clip; or
+key ARKit weights (.json Audio2Face, .csv Live Link Face) onto your own character's shape keys by name.
 
 Blender reads neither the fps of a USD stage nor glTF's times in seconds as anything but "seconds at
 the scene's current fps", and it ignores KHR_audio_emitter and UsdMedia.SpatialAudio. This helper
 reads the fps and frame count from the file (USD stage metadata; glTF asset.extras.facegen), sets the
 scene to them *before* importing (so glTF keys land on frames 0..T-1), imports with Blender's own
 importer, and adds the WAV written beside the file (`out.wav`) as a sound strip from frame 0, with
-audio-synced playback.
+audio-synced playback. Without a WAV it takes the sound inside the file (a .usdz's WAV, a glTF's
+embedded MP3), packs it into the .blend and leaves no temporary file behind.
+
+ARKit weights go onto the shape keys whose names match ARKit's 52 (facegen_arkit.py: case-insensitive,
+prefixes such as `blendShape1.` or `ARKit_` stripped, `_L`/`_R` = Left/Right) of the target objects; the
+scene gets the file's fps, frame range and sound, and the ARKit shapes without a shape key are listed.
 
 Three ways to use it:
 
     blender --python facegen_import.py -- out.glb [--fps 25] [--audio out.wav] [--empty] [--save out.blend]
+    blender character.blend --python facegen_import.py -- out.json --target Face [--save out.blend]
     import facegen_import; facegen_import.import_file("out.usdc")      # inside Blender's Python / bpy
-    the add-on (this folder zipped, see docs/dcc.md): File > Import > facegen animation
+    the add-on (this folder, zipped as facegen_blender, see docs/dcc.md): File > Import > facegen animation
 
 This file imports nothing from facegen (Blender's Python does not have it installed).
 """
@@ -20,12 +27,17 @@ This file imports nothing from facegen (Blender's Python does not have it instal
 from __future__ import annotations
 
 import argparse
+import base64
+import importlib
 import json
+import math
 import os
 import re
 import struct
 import sys
+import tempfile
 from pathlib import Path
+from urllib.parse import unquote
 
 GLTF_EXTENSIONS = (".glb", ".gltf")
 USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
@@ -36,7 +48,9 @@ EXTENSIONS = GLTF_EXTENSIONS + USD_EXTENSIONS
 
 
 def file_info(path: str | os.PathLike) -> dict:
-    """{"fps": float | None, "frames": int | None, "start": float, "audio": WAV path | None} of a file."""
+    """{"fps": float | None, "frames": int | None, "start": float, "audio": WAV path | None,
+    "embedded_audio": (file name, bytes) | None} of a file: the sound is the WAV it names or the one beside
+    it; else the audio inside it (a .usdz's WAV, a glTF's KHR_audio_emitter MP3)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in GLTF_EXTENSIONS:
@@ -48,22 +62,28 @@ def file_info(path: str | os.PathLike) -> dict:
     if info.get("audio") is None:
         wav = path.with_suffix(".wav")
         info["audio"] = str(wav) if wav.is_file() else None
+    if info["audio"] is not None:
+        info["embedded_audio"] = None
     return info
 
 
-def gltf_json(path: Path) -> dict:
-    """The JSON document of a .gltf or .glb file."""
+def _gltf_parts(path: Path) -> tuple[dict, bytes | None]:
+    """The JSON document of a .gltf/.glb and the .glb's binary chunk (None for a .gltf)."""
     data = path.read_bytes()
-    if data[:4] == b"glTF":
-        length, kind = struct.unpack_from("<II", data, 12)
-        if kind != 0x4E4F534A:
-            raise ValueError(f"{path}: the first GLB chunk is not JSON")
-        return json.loads(data[20:20 + length])
-    return json.loads(data)
+    if data[:4] != b"glTF":
+        return json.loads(data), None
+    length, kind = struct.unpack_from("<II", data, 12)
+    if kind != 0x4E4F534A:
+        raise ValueError(f"{path}: the first GLB chunk is not JSON")
+    binary = None
+    if len(data) >= 28 + length:
+        size, kind = struct.unpack_from("<II", data, 20 + length)
+        binary = data[28 + length:28 + length + size] if kind == 0x004E4942 else None
+    return json.loads(data[20:20 + length]), binary
 
 
 def _gltf_info(path: Path) -> dict:
-    doc = gltf_json(path)
+    doc, binary = _gltf_parts(path)
     extras = (doc.get("asset") or {}).get("extras") or {}
     facegen = extras.get("facegen") if isinstance(extras, dict) else None
     facegen = facegen if isinstance(facegen, dict) else {}
@@ -79,7 +99,33 @@ def _gltf_info(path: Path) -> dict:
         "frames": int(frames) if isinstance(frames, int) and frames > 0 else None,
         "start": 0.0,
         "audio": audio,
+        "embedded_audio": _gltf_mp3(path, doc, binary),
     }
+
+
+def _gltf_mp3(path: Path, doc: dict, binary: bytes | None) -> tuple[str, bytes] | None:
+    """("<stem>.mp3", bytes) of the first KHR_audio_emitter audio/mpeg in a bufferView, or None."""
+    emitter = (doc.get("extensions") or {}).get("KHR_audio_emitter") or {}
+    for item in emitter.get("audio") or []:
+        view = item.get("bufferView") if isinstance(item, dict) else None
+        if item.get("mimeType") != "audio/mpeg" or not isinstance(view, int):
+            continue
+        try:
+            view = doc["bufferViews"][view]
+            buffer = doc["buffers"][view["buffer"]]
+            uri = buffer.get("uri")
+            if uri is None:
+                data = binary or b""
+            elif uri.startswith("data:"):
+                data = base64.b64decode(uri.split(",", 1)[1])
+            else:
+                data = (path.parent / unquote(uri)).read_bytes()
+        except (KeyError, IndexError, TypeError, ValueError, OSError):
+            return None
+        start = view.get("byteOffset", 0)
+        mp3 = data[start:start + view["byteLength"]]
+        return (f"{path.stem}.mp3", mp3) if len(mp3) == view["byteLength"] else None
+    return None
 
 
 def _pxr():
@@ -113,7 +159,7 @@ def _usd_info(path: Path) -> dict:
     fps = stage.GetTimeCodesPerSecond() if (layer.HasTimeCodesPerSecond() or layer.HasFramesPerSecond()) else None
     start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
     frames = round(end - start) + 1 if layer.HasStartTimeCode() and layer.HasEndTimeCode() else None
-    audio, packaged = None, False
+    audio, embedded = None, None
     for prim in stage.Traverse():
         if prim.IsA(UsdMedia.SpatialAudio):
             asset = UsdMedia.SpatialAudio(prim).GetFilePathAttr().Get()
@@ -121,32 +167,27 @@ def _usd_info(path: Path) -> dict:
             if resolved and os.path.isfile(resolved):
                 audio = resolved
             elif resolved.endswith("]") and "[" in resolved:  # inside a .usdz: Blender needs a real file
-                audio = _extract_from_package(resolved)
-                packaged = audio is not None
+                embedded = _read_from_package(resolved)
             break
     return {"format": "usd", "fps": float(fps) if fps else None, "frames": frames, "start": float(start),
-            "audio": audio, "packaged_audio": packaged}
+            "audio": audio, "embedded_audio": embedded}
 
 
-def _extract_from_package(resolved: str) -> str | None:
-    """Copy `pkg.usdz[inner.wav]` out of the (zip) package into a temporary folder; its path."""
-    import tempfile
+def _read_from_package(resolved: str) -> tuple[str, bytes] | None:
+    """(file name, bytes) of `pkg.usdz[inner.wav]`, read from the (zip) package."""
     import zipfile
 
     package, inner = resolved[:-1].split("[", 1)
     try:
         with zipfile.ZipFile(package) as archive:
-            data = archive.read(inner)
+            return Path(inner).name, archive.read(inner)
     except (OSError, KeyError, zipfile.BadZipFile):
         return None
-    target = Path(tempfile.mkdtemp(prefix="facegen_audio_")) / Path(inner).name
-    target.write_bytes(data)
-    return str(target)
 
 
 def _usda_text_info(path: Path) -> dict:
     """Stage metadata from a text .usda's header when pxr is not importable."""
-    info = {"format": "usd", "fps": None, "frames": None, "start": 0.0, "audio": None}
+    info = {"format": "usd", "fps": None, "frames": None, "start": 0.0, "audio": None, "embedded_audio": None}
     if path.suffix.lower() not in (".usda", ".usd"):
         return info
     head = path.read_bytes()[:4096]
@@ -187,12 +228,17 @@ def import_file(
     audio: str | os.PathLike | None = None,
     sound: bool = True,
     scene=None,
+    target=None,
 ) -> dict:
     """Import a facegen animation into `scene` (default: the current one) and set it up for playback.
 
-    `fps` overrides the file's rate (needed only for files that do not state one); `audio` replaces
-    the WAV sidecar; `sound=False` adds no sound strip. Returns what was done: objects, mesh, fps,
-    frames, sound (strip name or None), audio (its file).
+    A .glb/.gltf/.usd* file is imported with Blender's importer. A .json (Audio2Face) or .csv (Live Link
+    Face) of ARKit weights is keyed onto the shape keys named like ARKit's of `target` (an object or its
+    name, or a list of them; default: every object with such shape keys). `fps` overrides the file's rate
+    (needed only for files that state none); `audio` replaces the WAV beside the file; `sound=False` adds
+    no sound strip. Returns what was done: objects, fps, frames, sound (strip name or None), audio (its
+    file), warnings; for glTF/USD also mesh; for ARKit weights also matched, unmatched (ARKit shapes no
+    shape key stands for), keys. Raises ValueError/OSError/RuntimeError with a one-line message.
     """
     import bpy
 
@@ -200,6 +246,52 @@ def import_file(
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist")
     scene = scene or bpy.context.scene
+    arkit = _sibling("facegen_arkit")
+    if path.suffix.lower() in arkit.ARKIT_EXTENSIONS:
+        done, info = _apply_weights(arkit, path, target, fps, scene)
+    elif target:
+        raise ValueError(f"{path.name}: a target applies ARKit weights (.json, .csv); import {path.suffix} "
+                         "files without one")
+    else:
+        done, info = _import_animation(path, fps, scene)
+    scene.frame_start = 0
+    scene.frame_end = max(0, done["frames"] - 1)
+    scene.frame_set(0)
+    wav = str(audio) if audio is not None else info["audio"]
+    embedded = info.get("embedded_audio") if wav is None else None
+    done.update(sound=None, audio=wav, warnings=[])
+    if sound and (wav or embedded):
+        with tempfile.TemporaryDirectory(prefix="facegen_audio_") as folder:
+            if embedded:  # inside the file: written out for Blender to read, packed into the .blend, removed
+                wav = Path(folder) / embedded[0]
+                wav.write_bytes(embedded[1])
+                done["audio"] = f"{path.name}[{embedded[0]}]"
+            strip = add_sound(scene, wav)
+            if embedded:
+                strip.sound.pack()
+        done["sound"] = strip.name
+        scene.sync_mode = "AUDIO_SYNC"
+    elif sound:
+        remove_sound(scene)  # an earlier clip's sound would play with this one
+        done["warnings"].append(f"{path.name}: no sound: no {path.stem}.wav beside it and none inside it "
+                                "(pass --audio FILE)")
+    return done
+
+
+def _sibling(name: str):
+    """A module of this folder: relative inside the add-on package, else from this file's folder."""
+    if __package__:
+        return importlib.import_module(f"{__package__}.{name}")
+    folder = str(Path(__file__).resolve().parent)
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    return importlib.import_module(name)
+
+
+def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]:
+    """Import a glTF/USD file with Blender's importer at the file's rate; (what was done, file_info)."""
+    import bpy
+
     info = file_info(path)
     rate = float(fps or info["fps"] or scene_fps(scene))
     before = set(bpy.data.objects)
@@ -221,24 +313,38 @@ def import_file(
         if keys is not None and keys.animation_data is not None and keys.animation_data.action is not None:
             snap_keys_to_frames(keys.animation_data.action)
     frames = info["frames"] or _imported_frames(scene, meshes, info["format"])
-    scene.frame_start = 0
-    scene.frame_end = max(0, frames - 1)
-    scene.frame_set(0)
-    strip = None
-    wav = str(audio) if audio is not None else info["audio"]
-    if sound and wav:
-        strip = add_sound(scene, wav)
-        scene.sync_mode = "AUDIO_SYNC"
-        if info.get("packaged_audio"):  # extracted from a .usdz into a temporary folder: keep it in the .blend
-            strip.sound.pack()
-    return {
-        "objects": [o.name for o in objects],
-        "mesh": meshes[0].name if meshes else None,
-        "fps": scene_fps(scene),
-        "frames": frames,
-        "sound": strip.name if strip is not None else None,
-        "audio": wav,
-    }
+    done = {"objects": [o.name for o in objects], "mesh": meshes[0].name if meshes else None,
+            "fps": scene_fps(scene), "frames": frames}
+    return done, info
+
+
+def _apply_weights(arkit, path: Path, target, fps: float | None, scene) -> tuple[dict, dict]:
+    """Key an ARKit JSON/CSV onto the target objects' shape keys at its rate; (what was done, audio info)."""
+    import bpy
+
+    clip = arkit.read_weights(path, fps)
+    if target is None:
+        objects = [o for o in scene.objects if arkit.arkit_keys(o)]
+        if not objects:
+            raise ValueError(f"{path.name}: no object in the scene has shape keys named like ARKit's: "
+                             f"pass the character as target (objects: {_names(scene.objects)})")
+    else:
+        objects = []
+        for item in target if isinstance(target, list | tuple) else [target]:
+            obj = bpy.data.objects.get(item) if isinstance(item, str) else item
+            if obj is None:
+                raise ValueError(f"no object named {item!r}: the objects are {_names(bpy.data.objects)}")
+            objects.append(obj)
+    done = arkit.key_shapes(objects, clip, name=f"facegen ARKit {path.stem}")
+    set_scene_fps(scene, clip["fps"])
+    frames = math.ceil(float(clip["frames"][-1])) + 1
+    done.update(objects=[o.name for o in objects], fps=scene_fps(scene), frames=frames)
+    return done, {"audio": clip["audio"]}
+
+
+def _names(objects) -> str:
+    names = sorted(o.name for o in objects)
+    return ", ".join(names) if names else "none"
 
 
 def action_fcurves(action):
@@ -283,15 +389,24 @@ def _imported_frames(scene, meshes, kind: str) -> int:
     return int(scene.frame_end - scene.frame_start) + 1
 
 
+SOUND_STRIP = "facegen audio"
+
+
 def add_sound(scene, wav: str | os.PathLike, channel: int = 1, frame_start: int = 0):
     """A sound strip of `wav` starting at `frame_start` (replacing facegen's earlier one)."""
+    remove_sound(scene)
     editor = scene.sequence_editor or scene.sequence_editor_create()
     strips = editor.strips if hasattr(editor, "strips") else editor.sequences  # Blender 4.4+ / older
-    name = "facegen audio"
-    old = strips.get(name) if hasattr(strips, "get") else None
+    return strips.new_sound(SOUND_STRIP, str(wav), channel, frame_start)
+
+
+def remove_sound(scene) -> None:
+    """Remove facegen's sound strip (of an earlier import), if there is one."""
+    editor = scene.sequence_editor
+    strips = (editor.strips if hasattr(editor, "strips") else editor.sequences) if editor is not None else None
+    old = strips.get(SOUND_STRIP) if strips is not None else None
     if old is not None:
         strips.remove(old)
-    return strips.new_sound(name, str(wav), channel, frame_start)
 
 
 # ---- command line (blender --python facegen_import.py -- FILE ...) ----------------------------------------
@@ -301,7 +416,11 @@ def main(argv: list[str] | None = None) -> dict:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     parser = argparse.ArgumentParser(prog="facegen_import", description=__doc__.splitlines()[0])
-    parser.add_argument("file", help="a facegen .glb/.gltf/.usd/.usda/.usdc/.usdz file")
+    parser.add_argument("file", help="a facegen .glb/.gltf/.usd/.usda/.usdc/.usdz file, or ARKit weights "
+                        "(.json Audio2Face, .csv Live Link Face)")
+    parser.add_argument("--target", action="append", metavar="OBJECT",
+                        help="the object whose ARKit-named shape keys get the weights (repeatable; default: "
+                        "every object with such shape keys)")
     parser.add_argument("--fps", type=float, help="frame rate, when the file does not state one")
     parser.add_argument("--audio", help="a WAV to use instead of the sidecar beside the file")
     parser.add_argument("--no-sound", action="store_true", help="add no sound strip")
@@ -312,7 +431,14 @@ def main(argv: list[str] | None = None) -> dict:
 
     if args.empty:
         bpy.ops.wm.read_factory_settings(use_empty=True)
-    done = import_file(args.file, fps=args.fps, audio=args.audio, sound=not args.no_sound)
+    try:
+        done = import_file(args.file, fps=args.fps, audio=args.audio, sound=not args.no_sound, target=args.target)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise SystemExit(f"facegen_import: error: {exc}") from None
+    for line in done["warnings"]:
+        print(f"facegen_import: warning: {line}")
+    if done.get("unmatched"):
+        print(f"facegen_import: no shape key for {len(done['unmatched'])} ARKit shapes: {', '.join(done['unmatched'])}")
     if args.save:
         bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.save).resolve()))
     print("facegen_import: " + json.dumps(done))
