@@ -158,9 +158,10 @@ def test_name_rule_copy_equals_facegen_arkit_names():
     assert facegen_arkit.ARKIT_NAMES == ARKIT_NAMES
     names = [*ARKIT_NAMES, *CHARACTER_KEYS, *LIVE_LINK_COLUMNS, "blendShape2.JawOpen", "ARKIT-eyeWide_L",
              "facs_mouthPress-R", "Head|browDown_L", "bs.tongueOut", "eyeLookUp.L", "mouthClose.001",
-             "jaw_open", "Basis", "", " cheekSquint R "]
+             "jaw_open", "Basis", "", " cheekSquint R ", "MOUTHFUNNEL", "MOUTHROLLUPPER", "EYEBLINK_L"]
     assert [facegen_arkit.arkit_name(n) for n in names] == [arkit_name(n) for n in names]
     assert facegen_arkit.arkit_name("ARKit_mouthSmile_L") == "mouthSmileLeft"
+    assert arkit_name("MOUTHFUNNEL") == "mouthFunnel" and arkit_name("MOUTHROLLUPPER") == "mouthRollUpper"
 
 
 def test_read_weights_json_and_csv(tmp_path):

@@ -29,7 +29,7 @@ const PREFIX = /^(?:.*[.:|/])|^(?:arkit|blendshape\d*|bs|facs)[_\-. ]+/i;
 
 /** The ARKit shape a morph target called `name` stands for, or null. */
 export function arkitName(name) {
-  const key = name.trim().replace(PREFIX, "").replace(/[_\-. ]?(L|R)$/, (_, side) => (side === "L" ? "Left" : "Right"));
+  const key = name.trim().replace(PREFIX, "").replace(/(?:[_\-. ]|(?<=[a-z]))(L|R)$/, (_, side) => (side === "L" ? "Left" : "Right"));
   return KEY.get(key.replaceAll("_", "").toLowerCase()) ?? null;
 }
 

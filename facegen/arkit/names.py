@@ -43,5 +43,5 @@ def arkit_name(name: str) -> str | None:
     common prefixes stripped (`blendShape1.eyeBlinkLeft`, `ARKit_JawOpen`, `Face:mouthClose`) and `_L`/`_R`
     suffixes read as Left/Right (`mouthSmile_L`)."""
     key = _PREFIX.sub("", name.strip())
-    key = re.sub(r"[_\-. ]?(L|R)$", lambda m: "Left" if m.group(1) == "L" else "Right", key)
+    key = re.sub(r"(?:[_\-. ]|(?<=[a-z]))(L|R)$", lambda m: "Left" if m.group(1) == "L" else "Right", key)
     return _KEY.get(key.replace("_", "").lower())

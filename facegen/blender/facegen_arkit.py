@@ -45,7 +45,7 @@ def arkit_name(name: str) -> str | None:
     """The ARKit shape a shape key called `name` stands for, or None (the rule of facegen.arkit.names):
     case-insensitive, prefixes such as `blendShape1.`, `ARKit_`, `Face:` stripped, `_L`/`_R` = Left/Right."""
     key = _PREFIX.sub("", name.strip())
-    key = re.sub(r"[_\-. ]?(L|R)$", lambda m: "Left" if m.group(1) == "L" else "Right", key)
+    key = re.sub(r"(?:[_\-. ]|(?<=[a-z]))(L|R)$", lambda m: "Left" if m.group(1) == "L" else "Right", key)
     return _KEY.get(key.replace("_", "").lower())
 
 
