@@ -111,6 +111,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
     from facegen.exchange import check_write_options, format_module, format_of, write_animation
+    from facegen.exchange.wav import is_same_file
     from facegen.pipeline import animate as run
 
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
@@ -136,7 +137,13 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     if preview:
         from facegen.render import render_animation
 
-        result = render_animation(anim, preview, progress=not quiet)
+        try:
+            result = render_animation(anim, preview, progress=not quiet)
+        except BaseException:  # all or nothing: no animation without the preview asked for
+            for path in written:
+                if not is_same_file(audio, path):
+                    path.unlink(missing_ok=True)
+            raise
         for note in result.notes:
             progress(note)
         progress(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")

@@ -441,3 +441,23 @@ def test_import_biwi_refuses_what_is_not_a_release(tmp_path):
         import_biwi(tmp_path, tmp_path / "out")
     with pytest.raises(FacegenError, match="unknown normalisation"):
         import_biwi(tmp_path, tmp_path / "out", normalisation="mean")
+
+
+def test_failed_import_leaves_no_folder(tmp_path):
+    """Every take fails (frames of another topology): the new dataset folder is not left half-written."""
+    raw = tmp_path / "raw"
+    for d in ("rigid_scans", "faces/F2/e01", "videos"):
+        (raw / d).mkdir(parents=True)
+    face = grid_face()
+    (raw / "rigid_scans" / "F2.obj").write_text(_obj_text(Mesh(face.vertices * 180, face.faces)))
+    write_vl(np.zeros((7, 3), np.float32), raw / "faces" / "F2" / "e01" / "frame_001.vl")
+    (raw / "videos" / "F2_e01.wav").write_bytes(b"RIFF")
+    out = tmp_path / "dataset"
+    with pytest.raises(FacegenError, match="no sequence of .* could be imported"):
+        import_biwi(raw, out, warn=None)
+    assert not out.exists()
+    out.mkdir()
+    (out / "mine.txt").write_text("kept")
+    with pytest.raises(FacegenError):
+        import_biwi(raw, out, warn=None)
+    assert (out / "mine.txt").read_text() == "kept"  # a folder that had files keeps them

@@ -220,7 +220,6 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
     text/<name>.txt from `transcripts` (a file or folder, see read_transcripts), and copies lve.txt and
     fdd.txt from `regions` (a folder, e.g. CodeTalker's BIWI/regions) into regions/.
     """
-    from tqdm import tqdm
 
     raw, out = Path(raw), Path(out)
     warn = warn or silent
@@ -258,10 +257,7 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
         centre = rotated.mean(axis=0)
         references[s] = (centre, np.sqrt(surface_area(rotated - centre, faces)))
 
-    writer = DatasetWriter(out)
-    report = ImportReport(out=out, subjects=sorted(meshes))
-    writer.write_templates(templates)
-    writer.write_mesh(Mesh(np.mean(np.stack(list(templates.values())), axis=0).astype(np.float32), faces))
+    region_idx = {}
     if regions is not None:
         for stem, region in REGION_FILES.items():
             src = Path(regions) / f"{stem}.txt"
@@ -271,10 +267,33 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
             if idx.size and (idx.min() < 0 or idx.max() >= first.num_vertices):
                 raise FacegenError(f"{src} has vertex indices outside the {first.num_vertices} vertices "
                                    "of the mesh: pass the region files of this topology")
-            writer.write_regions({region: idx})
+            region_idx[region] = idx
     else:
         warn("no --regions given: copy lve.txt and fdd.txt into regions/ before evaluating "
              "(LVE and FDD need them)")
+    fresh = not out.exists() or (out.is_dir() and not any(out.iterdir()))
+    try:
+        return _import_takes(raw, out, meshes, templates, faces, references, region_idx, normalisation,
+                             sentences_text, sample_rate, progress, warn)
+    except BaseException:
+        if fresh and out.is_dir():  # nothing half-imported is left: the folder was new (or empty)
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np.ndarray, references: dict,
+                  region_idx: dict, normalisation: str, sentences_text: dict, sample_rate: int, progress: bool,
+                  warn: Say) -> ImportReport:
+    """The writing half of import_biwi (its inputs checked)."""
+    from tqdm import tqdm
+
+    first = next(iter(meshes.values()))
+    writer = DatasetWriter(out)
+    report = ImportReport(out=out, subjects=sorted(meshes))
+    writer.write_templates(templates)
+    writer.write_mesh(Mesh(np.mean(np.stack(list(templates.values())), axis=0).astype(np.float32), faces))
+    if region_idx:
+        writer.write_regions(region_idx)
 
     videos = _find_videos(raw)
     takes: list[tuple[str, int, list[Path]]] = []

@@ -223,8 +223,8 @@ def synthesize_corpus(out: str | os.PathLike, speakers: str | Iterable[str] | No
     the test-B speakers' e37–e48. Sequences already in the folder's manifest (same parameters) are
     skipped. `workers` processes generate speakers in parallel. Returns what was done.
     """
-    if fps <= 0:
-        raise FacegenError(f"fps {fps} must be positive, e.g. 25")
+    if not 0 < fps <= 1000:  # also refuses nan
+        raise FacegenError(f"fps {fps} must be a positive number up to 1000, e.g. 25")
     if workers < 1:
         raise FacegenError(f"workers {workers} must be at least 1")
     started = time.monotonic()
