@@ -230,8 +230,9 @@ def _loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
 
 
 def _mismatch(detail: str) -> FacegenError:
-    return FacegenError(f"the transcript does not match the speech ({detail}): check the transcript, "
-                        "or pass a ready alignment with --alignment FILE")
+    return FacegenError(f"the transcript does not match the speech ({detail}): check the transcript; the aligner "
+                        "knows English only, so for speech in another language align it with a tool for that "
+                        "language (e.g. the Montreal Forced Aligner) and pass --alignment FILE")
 
 
 def _check_match(audio: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray,

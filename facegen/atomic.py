@@ -43,7 +43,8 @@ def check_writable(target: str | os.PathLike) -> None:
         raise FacegenError(f"output name {target.name[:40]}... is {len(os.fsencode(target.name))} bytes long; this "
                            f"file system allows {limit}: choose a shorter -o name")
     if target.is_dir():
-        raise FacegenError(f"output {target} is a folder: give a file name such as {target / 'out.usda'}")
+        raise FacegenError(f"{target} is a folder, so facegen cannot write that file there: rename or remove the "
+                           "folder, or choose another -o name")
 
 
 def _umask() -> int:

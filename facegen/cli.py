@@ -117,6 +117,8 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
     check_writable(output)
+    if not is_same_file(audio, Path(output).with_suffix(".wav")):
+        check_writable(Path(output).with_suffix(".wav"))  # the sidecar WAV
     _protect_inputs([output, Path(output).with_suffix(".wav"), preview], transcript=text_file,
                     alignment=alignment, model=model, template=template)
     options = {k: v for k, v in (("mode", usd_mode), ("morph_targets", morph_targets), ("tolerance", tolerance))
@@ -264,6 +266,8 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
 
     if model and template:
         raise FacegenError("--model and --template cannot be used together: pass one reference")
+    if not Path(file).is_file():
+        raise FacegenError(f"{file} does not exist: pass the animation file to check")
     mesh = None
     if model:
         from facegen.bundle import load_bundle

@@ -96,7 +96,7 @@ def test_disk_full_on_a_small_tmpfs(tmp_path, suffix):
         assert proc_err is not None and proc_err.startswith("no space left on ") and "\n" not in proc_err
         assert [p.name for p in mount.iterdir()] == []
     finally:
-        subprocess.run(["umount", str(mount)], check=False)
+        subprocess.run(["umount", "-l", str(mount)], check=False)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
