@@ -166,7 +166,7 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     press = d.delta(lip_close=1.0) + d.vec(dy=-0.08 * sgn * near * lat, dz=-0.1 * near)
     d.sided(out, "mouthPress", press)
     lower = d.field(f["d_lo"], 2.0, ~upper)
-    d.sided(out, "mouthLowerDown", d.vec(dy=-0.4 * lower * lat_wide, dz=0.06 * lower))
+    d.sided(out, "mouthLowerDown", d.vec(dy=-0.55 * lower * lat_wide, dz=0.08 * lower))
     d.sided(out, "mouthUpperUp", d.delta(upper_lip_raise=1.0))
 
 

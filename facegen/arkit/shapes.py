@@ -30,7 +30,7 @@ _MEMO: dict[str, Shapes] = {}
 _MEMO_SIZE = 4
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Shapes:
     """The 52 ARKit shapes of one face: `offsets` [52, V, 3] float32 (shape at weight 1 minus the template,
     mesh units, read-only), in `names` order (ARKIT_NAMES); `mm` mesh units per millimetre."""
