@@ -19,7 +19,7 @@ from facegen.arkit.shapes import arkit_shapes
 from facegen.atomic import atomic_path
 from facegen.render.raster import BACKGROUND, Renderer, face_colors
 from facegen.synth.face import load_template
-from facegen.synth.rig import fit_ellipsoid
+from facegen.synth.rig import Rig
 
 PER_SHEET, COLUMNS = 13, 7
 IRIS, PUPIL = (0.30, 0.42, 0.52), (0.05, 0.05, 0.06)  # sRGB
@@ -28,9 +28,9 @@ IRIS_DEG, PUPIL_DEG = 24.0, 10.0
 
 def _colors(mesh) -> np.ndarray:
     colors = face_colors(mesh.regions, mesh.num_vertices)
-    for side in ("left", "right"):
+    rig = Rig(mesh)
+    for side, centre, axes in zip(("left", "right"), rig.eye_centres, rig.eye_axes, strict=True):
         idx = mesh.regions[f"{side}_eyeball"]
-        centre, axes = fit_ellipsoid(mesh.vertices[idx])
         u = (mesh.vertices[idx] - centre) / axes
         polar = np.degrees(np.arccos(np.clip(u[:, 2] / np.linalg.norm(u, axis=1), -1, 1)))
         colors[idx[polar < IRIS_DEG]] = IRIS
