@@ -11,7 +11,7 @@ from facegen.arkit.names import ARKIT_NAMES
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
 from facegen.synth.face import make_face, speaker_face
-from facegen.synth.rig import CHANNELS, Rig
+from facegen.synth.rig import CHANNELS, RIG_REGIONS, Rig
 
 
 @pytest.fixture(scope="module")
@@ -173,6 +173,7 @@ def test_tongue_out_on_a_face_without_tongue_parts_the_lips(shapes, face):
 
 
 def test_missing_regions_are_named(face):
+    assert set(RIG_REGIONS) < set(arkit.REGIONS)  # checked before the (lazily imported) rig is built
     regions = {k: v for k, v in face.regions.items() if k not in ("nose", "jaw")}
     with pytest.raises(FacegenError, match="jaw, nose") as err:
         arkit.arkit_shapes(Mesh(face.vertices, face.faces, regions))

@@ -25,7 +25,7 @@ from facegen.mesh import Mesh
 SOURCES = (Path(__file__).with_name("deformers.py"), Path(__file__).parents[1] / "synth" / "rig.py")
 REGIONS = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
            "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin", "right_lower_lid_margin",
-           "brows", "forehead", "cheeks", "nose")  # the rig's regions and the nose (noseSneer)
+           "brows", "forehead", "cheeks", "nose")  # synth.rig.RIG_REGIONS and the nose (noseSneer)
 _MEMO: dict[str, Shapes] = {}
 _MEMO_SIZE = 4
 
