@@ -3,8 +3,8 @@
 The deformations themselves are in facegen.arkit.deformers (on facegen.synth.rig's Rig). Building them takes
 1.2-1.6 s on the 23,370-vertex face, so the result is memoised in the process and stored on disk
 (safetensors under $XDG_CACHE_HOME/facegen/arkit, default ~/.cache), keyed by a digest of the mesh's
-vertices, faces and regions and of the deformers' source code; a damaged or foreign cache file is rebuilt, an unwritable cache folder only
-costs the rebuild.
+vertices, faces and regions and of the deformers' source code; a damaged or foreign cache file is rebuilt,
+an unwritable cache folder only costs the rebuild.
 """
 
 from __future__ import annotations
