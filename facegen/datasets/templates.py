@@ -6,6 +6,7 @@ arrays (and the numpy functions that rebuild arrays): any other class or functio
 
 from __future__ import annotations
 
+import io
 import os
 import pickle
 from pathlib import Path
@@ -14,6 +15,8 @@ import numpy as np
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
+
+MAX_PKL_BYTES = 256 << 20
 
 
 def _allowed_globals() -> dict[tuple[str, str], object]:
@@ -61,9 +64,12 @@ def read_templates_pkl(path: str | os.PathLike) -> dict[str, np.ndarray]:
     anything else is refused with FacegenError before it is created.
     """
     path = Path(path)
+    if path.is_file() and path.stat().st_size > MAX_PKL_BYTES:
+        raise FacegenError(f"{path} is {path.stat().st_size / 1e6:.0f} MB, more than any set of face templates "
+                           "(BIWI's is ~4 MB): check the file")
     try:
-        with open(path, "rb") as f:
-            data = _TemplateUnpickler(f, encoding="latin1").load()
+        # from memory, not the file: a string opcode claiming 200 MB then reads only the bytes there are
+        data = _TemplateUnpickler(io.BytesIO(path.read_bytes()), encoding="latin1").load()
     except OSError as exc:
         raise FacegenError(f"cannot read {path} ({exc.strerror}): check the file") from exc
     except Exception as exc:  # UnpicklingError and whatever a malformed stream raises
