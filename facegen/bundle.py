@@ -193,6 +193,10 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
         regions = {k[len("region."):]: v.numpy() for k, v in tensors.items() if k.startswith("region.")}
         template = Mesh(tensors["template.vertices"].numpy(), tensors["template.faces"].numpy(), regions)
         features = FeatureConfig.from_dict(meta["feature_config"])
+        if not (features.fps > 0 and features.sample_rate > 0) or abs(
+                features.sample_rate / features.fps - round(features.sample_rate / features.fps)) > 1e-9:
+            raise FacegenError(f"model bundle {path} has a frame rate of {features.fps} fps, which does not divide its "
+                               f"{features.sample_rate} Hz audio: re-train or re-export it")
         bundle = Bundle(
             model=model.eval(),
             features=features,
