@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from facegen.animation import Animation, check_animation
+from facegen.animation import Animation
 from facegen.arkit.names import LIVE_LINK_COLUMNS, LIVE_LINK_ROTATIONS, arkit_name
-from facegen.arkit.solve import fit_arkit
-from facegen.exchange.wav import atomic_with_sidecar
+from facegen.arkit.solve import Fit
+from facegen.exchange.arkit_json import write_fitted
 
 TIMECODE = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,})(?:\.(\d+))?$")
 
@@ -44,17 +44,14 @@ def parse_timecode(text: str) -> tuple[int, int, float] | None:
     return int(hours) * 3600 + int(minutes) * 60 + int(seconds), int(frame), float(f"0.{sub or 0}")
 
 
-def write(
-    anim: Animation,
-    path: str | os.PathLike,
-    *,
-    write_audio: bool = True,
-    audio_source: str | os.PathLike | None = None,
-) -> list[Path]:
+def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True,
+          audio_source: str | os.PathLike | None = None) -> list[Path]:
     """Fit the ARKit weights of `anim` and write them as Live Link Face CSV with, when there is audio, a WAV
     sidecar; return the files. A template without the rig's regions is a FacegenError (nothing written)."""
-    check_animation(anim)
-    fit = fit_arkit(anim)
+    return write_fitted(anim, path, _table, write_audio, audio_source)
+
+
+def _table(anim: Animation, fit: Fit, track: str) -> str:
     shapes = LIVE_LINK_COLUMNS[2 : len(LIVE_LINK_COLUMNS) - len(LIVE_LINK_ROTATIONS)]
     order = [fit.names.index(arkit_name(column)) for column in shapes]
     count = len(shapes) + len(LIVE_LINK_ROTATIONS)
@@ -62,8 +59,4 @@ def write(
     weights = np.char.mod("%.5f", fit.weights[:, order].astype(np.float64))
     lines = [",".join(LIVE_LINK_COLUMNS)]
     lines += [f"{timecode(t, anim.fps)},{count},{','.join(row)}{rotations}" for t, row in enumerate(weights)]
-    path = Path(path)
-    audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
-    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
-        tmp.write_text("\n".join(lines) + "\n")
-    return [path] if wav is None else [path, wav]
+    return "\n".join(lines) + "\n"
