@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from facegen.mesh import vertex_normals
 from facegen.synth.rig import CHANNELS, Rig, falloff, rotate_x
 
 SIDE_BLEND_CM = 1.0  # the Left/Right weights cross over between -1 cm and +1 cm of the midline
 LOOK_SIDE, LOOK_UP, LOOK_DOWN = 0.52, 0.42, 0.45  # eye rotation (rad) at eyeLookIn/Out, Up, Down = 1
 EYE_ROTATED_DEG, EYE_FIXED_DEG = 45.0, 85.0  # the eyeball cap turns fully inside, not at all at its rim
 SMILE_GAIN = 1.35  # mouthSmile = the rig's smile (the mouth-corner part of cheek_raise) times this
+PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind the eyeball centres
 TONGUE_JAW = 0.22  # jaw_open of tongueOut on a face without a tongue
 
 
@@ -69,10 +69,16 @@ class _Deformers:
         """A smooth weight: 1 at distance 0 (cm), 0 from `radius` on, only where `mask`."""
         return self.rig.smooth(falloff(d, radius) * mask)
 
-    def nearest(self, candidates: np.ndarray, dx: float, dy: float) -> int:
-        """The vertex of `candidates` nearest (in x, y) to the point dx, dy cm from the mouth centre."""
-        target = self.rig.mouth_centre[:2] + np.array([dx, dy]) * self.cm
-        return int(candidates[np.argmin(np.linalg.norm(self.t[candidates, :2] - target, axis=1))])
+    def nearest_pair(self, candidates: np.ndarray, dx: float, dy: float) -> np.ndarray:
+        """Two vertices of `candidates`: the one nearest (in x, y) to the point dx, dy cm from the mouth
+        centre (dx > 0: on the left), and the one nearest to its mirror image (the same on a symmetric face)."""
+        def nearest(target: np.ndarray) -> int:
+            return int(candidates[np.argmin(np.linalg.norm(self.t[candidates, :2] - target, axis=1))])
+
+        left = nearest(self.rig.mouth_centre[:2] + np.array([dx, dy]) * self.cm)
+        mirrored = self.t[left, :2].copy()
+        mirrored[0] = 2 * self.rig.mouth_centre[0] - mirrored[0]
+        return np.array([left, nearest(mirrored)])
 
     def lids(self, upper: np.ndarray | float, lower: np.ndarray | float) -> np.ndarray:
         """Offsets of turning the lids about the eyeball centres: `upper` / `lower` rad per lid column
@@ -131,7 +137,7 @@ def _jaw(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthClose"] = d.pose(jaw_open=1.0, lip_close=1.0) - d.pose(jaw_open=1.0)
     # no tongue on this face: the small jaw drop and the lips parting a tongue pushed out would cause
     w_lo = d.field(d.f["d_lo"], 2.0, ~d.f["upper_side"])
-    out["tongueOut"] = d.delta(jaw_open=TONGUE_JAW) + d.vec(dy=-0.15 * w_lo * d.f["lat"], dz=0.25 * w_lo)
+    out["tongueOut"] = d.delta(jaw_open=TONGUE_JAW) + d.vec(dy=-0.15 * w_lo * d.f["lat"], dz=0.45 * w_lo)
 
 
 def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
@@ -160,7 +166,7 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     press = d.delta(lip_close=1.0) + d.vec(dy=-0.08 * sgn * near * lat, dz=-0.1 * near)
     d.sided(out, "mouthPress", press)
     lower = d.field(f["d_lo"], 2.0, ~upper)
-    d.sided(out, "mouthLowerDown", d.vec(dy=-0.4 * lower * lat_wide, dz=0.06 * lower))
+    d.sided(out, "mouthLowerDown", d.vec(dy=-0.55 * lower * lat_wide, dz=0.08 * lower))
     d.sided(out, "mouthUpperUp", d.delta(upper_lip_raise=1.0))
 
 
@@ -172,16 +178,17 @@ def _upper_face(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     d.sided(out, "browOuterUp", raise_ * (1 - inner)[:, None])
     # noseSneer: the alae and the skin beside the nose up, the upper lip a little with them
     nose = d.regions["nose"]
-    alae = np.array([d.nearest(nose, sx * 1.2, 2.85) for sx in (1.0, -1.0)])
-    ala = d.field(d.rig.distance(alae), 1.6)
-    d.sided(out, "noseSneer", d.vec(dx=-0.05 * np.sign(d.x) * ala, dy=0.3 * ala + 0.06 * d.f["w_up"],
+    ala = d.field(d.rig.distance(d.nearest_pair(nose, 1.2, 2.85)), 1.6)
+    d.sided(out, "noseSneer", d.vec(dx=-0.05 * np.tanh(d.x / 0.5) * ala, dy=0.3 * ala + 0.06 * d.f["w_up"],
                                     dz=0.05 * ala))
-    # cheekPuff: the cheeks between the mouth corners and the cheekbones blown out along their normals
+    # cheekPuff: the cheeks between the mouth corners and the cheekbones blown outwards, away from a
+    # vertical axis PUFF_AXIS_CM behind the eyeballs' centres
     skin = np.nonzero(np.isfinite(d.f["d_m"]))[0]
-    centres = np.array([d.nearest(skin, sx * 3.2, 1.2) for sx in (1.0, -1.0)])
-    puff = d.field(d.rig.distance(centres), 3.2)
-    normals = vertex_normals(d.t, d.rig.faces).astype(np.float64)
-    out["cheekPuff"] = 0.6 * d.cm * puff[:, None] * normals + d.vec(dz=0.1 * d.f["near"])
+    puff = d.field(d.rig.distance(d.nearest_pair(skin, 3.2, 1.2)), 3.2)
+    axis_z = d.rig.eye_centres[:, 2].mean() - PUFF_AXIS_CM * d.cm
+    outwards = np.stack([d.t[:, 0] - d.rig.mouth_centre[0], np.zeros(len(d.t)), d.t[:, 2] - axis_z], 1)
+    outwards /= np.maximum(np.linalg.norm(outwards, axis=1), 1e-12)[:, None]
+    out["cheekPuff"] = 0.6 * d.cm * puff[:, None] * outwards + d.vec(dz=0.1 * d.f["near"])
 
 
 def shape_offsets(rig: Rig, regions: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

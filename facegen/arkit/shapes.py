@@ -1,10 +1,10 @@
 """ARKit's 52 blend shapes as offsets of facegen's procedural face: `arkit_shapes(mesh) -> Shapes`, cached.
 
 The deformations themselves are in facegen.arkit.deformers (on facegen.synth.rig's Rig). Building them takes
-about a second on the 23,370-vertex face, so the result is memoised in the process and stored on disk
+1.2-1.6 s on the 23,370-vertex face, so the result is memoised in the process and stored on disk
 (safetensors under $XDG_CACHE_HOME/facegen/arkit, default ~/.cache), keyed by a digest of the mesh's
-vertices, faces and regions; a damaged or foreign cache file is rebuilt, an unwritable cache folder only
-costs the rebuild.
+vertices, faces and regions and of the deformers' source code; a damaged or foreign cache file is rebuilt,
+an unwritable cache folder only costs the rebuild.
 """
 
 from __future__ import annotations
@@ -21,15 +21,16 @@ from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
 
-SHAPES_VERSION = 1  # bump when a deformation changes: old cache files are then ignored
+# the code the shapes are made by: part of the cache key, so a changed deformation is never read from the cache
+SOURCES = (Path(__file__).with_name("deformers.py"), Path(__file__).parents[1] / "synth" / "rig.py")
 REGIONS = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
            "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin", "right_lower_lid_margin",
-           "brows", "forehead", "cheeks", "nose")  # the rig's regions and the nose (noseSneer)
+           "brows", "forehead", "cheeks", "nose")  # synth.rig.RIG_REGIONS and the nose (noseSneer)
 _MEMO: dict[str, Shapes] = {}
 _MEMO_SIZE = 4
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Shapes:
     """The 52 ARKit shapes of one face: `offsets` [52, V, 3] float32 (shape at weight 1 minus the template,
     mesh units, read-only), in `names` order (ARKIT_NAMES); `mm` mesh units per millimetre."""
@@ -44,8 +45,8 @@ class Shapes:
 
 
 def mesh_digest(mesh: Mesh) -> str:
-    """A hash of the mesh's vertices, faces and regions (and SHAPES_VERSION): the cache key."""
-    h = hashlib.sha256(f"arkit-shapes-{SHAPES_VERSION}".encode())
+    """A hash of the mesh's vertices, faces and regions and of the code in SOURCES: the cache key."""
+    h = hashlib.sha256(b"".join(path.read_bytes() for path in SOURCES))
     h.update(np.ascontiguousarray(mesh.vertices, np.float32).tobytes())
     h.update(np.ascontiguousarray(mesh.faces, np.int64).tobytes())
     for name in sorted(mesh.regions):

@@ -61,13 +61,19 @@ def rotate_x(pos: np.ndarray, idx: np.ndarray, centre: np.ndarray, angle: np.nda
     pos[:, idx, 2] = centre[None, :, 2] + y * s + z * c
 
 
-def fit_ellipsoid(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centre [3] and semi-axes [3] of the axis-aligned ellipsoid through `points` (least squares)."""
+def _fit_centre(points: np.ndarray) -> np.ndarray:
+    """Centre of the axis-aligned ellipsoid through `points` (least squares)."""
     p = np.asarray(points, np.float64)
     a = np.concatenate([p**2, p], 1)
     coef, *_ = np.linalg.lstsq(a, np.ones(len(p)), rcond=None)
-    centre = -coef[3:] / (2 * coef[:3])
-    return centre, np.sqrt((1 + np.sum(coef[:3] * centre**2)) / coef[:3])
+    return -coef[3:] / (2 * coef[:3])
+
+
+def _fit_axes(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Semi-axes of the axis-aligned ellipsoid about `centre` through `points` (least squares)."""
+    d = (np.asarray(points, np.float64) - centre) ** 2
+    inv_sq, *_ = np.linalg.lstsq(d, np.ones(len(d)), rcond=None)
+    return 1 / np.sqrt(inv_sq)
 
 
 class Rig:
@@ -96,9 +102,9 @@ class Rig:
         V = len(self.template)
         t = self.template
         # scale: mesh units per cm, from the distance between the eyeball centres
-        eyes = [fit_ellipsoid(t[reg[f"{s}_eyeball"]]) for s in ("left", "right")]
-        self.eye_centres = np.stack([c for c, _ in eyes])
-        self.eye_axes = np.stack([a for _, a in eyes])
+        self.eye_centres = np.stack([_fit_centre(t[reg["left_eyeball"]]), _fit_centre(t[reg["right_eyeball"]])])
+        self.eye_axes = np.stack([_fit_axes(t[reg[f"{s}_eyeball"]], c)
+                                  for s, c in zip(("left", "right"), self.eye_centres, strict=True)])
         cm = float(np.linalg.norm(self.eye_centres[0] - self.eye_centres[1])) / EYE_SPACING_CM
         self.cm = cm
         self._graph = self._build_graph()
