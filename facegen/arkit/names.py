@@ -1,4 +1,4 @@
-"""The names of ARKit's 52 face blend shapes, in Live Link Face's order, and how names in other files map to them.
+"""The names of ARKit's 52 face blend shapes, and how names in other files map to them.
 
 ARKit (ARFaceAnchor.BlendShapeLocation) names the shapes in lowerCamel (`eyeBlinkLeft`); Audio2Face's JSON
 uses the same names; Epic's Live Link Face CSV uses UpperCamel (`EyeBlinkLeft`) and adds nine head and eye
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 
+# in the order of Live Link Face's network protocol (the FaceBlendShape index)
 ARKIT_NAMES: tuple[str, ...] = (
     "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
     "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
@@ -31,7 +32,17 @@ def live_link_name(name: str) -> str:
     return name[0].upper() + name[1:]
 
 
-LIVE_LINK_COLUMNS: tuple[str, ...] = (("Timecode", "BlendShapeCount") + tuple(live_link_name(n) for n in ARKIT_NAMES)
+def _csv_order(names: tuple[str, ...]) -> tuple[str, ...]:
+    """The app's CSV lists JawRight before JawLeft and MouthRight before MouthLeft."""
+    out = list(names)
+    for left, right in (("jawLeft", "jawRight"), ("mouthLeft", "mouthRight")):
+        i, j = out.index(left), out.index(right)
+        out[i], out[j] = out[j], out[i]
+    return tuple(out)
+
+
+LIVE_LINK_COLUMNS: tuple[str, ...] = (("Timecode", "BlendShapeCount")
+                                      + tuple(live_link_name(n) for n in _csv_order(ARKIT_NAMES))
                                       + LIVE_LINK_ROTATIONS)
 
 _KEY = {n.lower(): n for n in ARKIT_NAMES}
