@@ -117,7 +117,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False), help="The video (.mp4).")
 @click.option("--compare", type=click.Path(dir_okay=False),
               help="Another animation (ground truth or another model) shown beside IN with an error heat map.")
-@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Bundle whose template a .npy IN uses.")
+@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Bundle whose template a .npy IN uses (default: the built-in model's, when the vertex count matches).")
 @click.option("--template", type=click.Path(dir_okay=False), help="Template mesh (PLY/OBJ) for a .npy IN.")
 @click.option("--fps", type=float, help="Frame rate of a .npy IN (default 25).")
 @click.option("--size", default=512, show_default=True, help="Pixels per view (square).")

@@ -19,13 +19,10 @@ from helpers import rig_clip
 
 from facegen.animation import Animation
 from facegen.errors import FacegenError
-from facegen.exchange import gltf, mp3, pca, read_animation, write_animation
+from facegen.exchange import gltf, mp3, pca, read_animation, surface, write_animation
+from facegen.mesh import vertex_normals
 
 IN_CI = os.environ.get("CI", "").lower() == "true"
-
-
-
-
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +167,8 @@ def test_gltf_with_bin_equals_glb(clip, tmp_path):
     assert files == [tmp_path / "b.gltf", tmp_path / "b.bin", tmp_path / "b.wav"]
     assert json.loads((tmp_path / "b.gltf").read_text())["buffers"][0]["uri"] == "b.bin"
     a, b = read_animation(tmp_path / "a.glb"), read_animation(tmp_path / "b.gltf")
-    assert np.array_equal(a.vertices, b.vertices) and gltf.decode(tmp_path / "b.gltf")["targets"].shape[0] == 6
+    assert np.array_equal(a.vertices, b.vertices)
+    assert gltf.decode(tmp_path / "b.gltf")["targets"].shape[0] == 6 + 1  # + "rest"
 
 
 def test_all_targets_are_exact(clip, tmp_path):
@@ -179,6 +177,70 @@ def test_all_targets_are_exact(clip, tmp_path):
     back = read_animation(tmp_path / "all.glb")
     assert gltf.decode(tmp_path / "all.glb")["targets"].shape[0] == clip.num_frames
     assert np.abs(back.vertices - clip.vertices).max() < 1e-6
+
+
+def _open_frame(anim: Animation) -> int:
+    """The frame where the jaw hangs lowest."""
+    jaw = anim.regions["jaw"]
+    return int(np.argmax(-(anim.vertices[:, jaw, 1] - anim.template[jaw, 1]).mean(1)))
+
+
+def _angles(normals: np.ndarray, true: np.ndarray) -> np.ndarray:
+    unit = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.degrees(np.arccos(np.clip((unit * true).sum(1), -1.0, 1.0)))
+
+
+def test_morph_targets_carry_normal_deltas(clip, tmp_path):
+    """At the most open frame the blended normals (base + weights @ NORMAL deltas, normalised as renderers
+    do) are within 10 degrees of the true normals of the blended surface; rest-pose normals are not."""
+    out = tmp_path / "lit.glb"
+    write_animation(clip, out, write_audio=False)
+    decoded = gltf.decode(out)
+    file, prim = decoded["file"], decoded["file"].doc.meshes[0].primitives[0]
+    base = file.accessor(prim.attributes.NORMAL)
+    deltas = np.stack([file.accessor(t["NORMAL"]) for t in prim.targets])
+    t = _open_frame(clip)
+    true = vertex_normals(gltf.reconstruct(decoded)[t], decoded["faces"])
+    rest_off = int((_angles(base, true) > 10).sum())
+    blended_off = _angles(base + np.einsum("k,kvc->vc", decoded["weights"][t], deltas), true)
+    assert rest_off > 40  # the mouth really opens: rest-pose normals are wrong there
+    assert int((blended_off > 10).sum()) <= 3, f"{int((blended_off > 10).sum())} vertices > 10 degrees off"
+    assert float(np.median(blended_off)) < 0.5
+    assert np.abs(deltas).max() > 0.05 and (deltas == 0).all(axis=2).mean() > 0.3  # real deltas, kept sparse
+
+
+def test_base_mesh_is_the_template_and_frames_are_reproduced(clip, tmp_path):
+    """Static readers show the base mesh: it is the neutral face, and the weights (with a "rest" target
+    at weight 1) express every frame as offsets from it."""
+    out = tmp_path / "rest.glb"
+    write_animation(clip, out, write_audio=False)
+    decoded = gltf.decode(out)
+    assert np.array_equal(decoded["base"], clip.template)
+    names = _doc(out).meshes[0].extras["targetNames"]
+    assert names[-1] == "rest" and np.all(decoded["weights"][:, -1] == 1.0)
+    error = float(np.linalg.norm(gltf.reconstruct(decoded) - clip.vertices, axis=2).max())
+    assert error <= pca.DEFAULT_TOLERANCE * clip.size
+    assert np.array_equal(read_animation(out).template, clip.template)
+
+
+def test_uvs_and_skin_material(clip, tmp_path):
+    out = tmp_path / "skin.glb"
+    write_animation(clip, out, write_audio=False)
+    doc = _doc(out)
+    prim = doc.meshes[0].primitives[0]
+    uv = gltf.GltfFile(out).accessor(prim.attributes.TEXCOORD_0)
+    assert uv.shape == (clip.num_vertices, 2) and doc.accessors[prim.attributes.TEXCOORD_0].type == "VEC2"
+    assert uv.min() == 0.0 and uv.max() == 1.0
+    # v runs down in glTF: the forehead (top) is near v = 0, the chin near v = 1; u runs left to right
+    top, bottom = np.argmax(clip.template[:, 1]), np.argmin(clip.template[:, 1])
+    assert uv[top, 1] < 0.05 and uv[bottom, 1] > 0.95
+    left, right = np.argmin(clip.template[:, 0]), np.argmax(clip.template[:, 0])
+    assert uv[left, 0] < 0.5 < uv[right, 0]
+    assert np.allclose(uv, surface.face_uvs(clip.template) * [1, -1] + [0, 1])  # stable: the template's
+    material = doc.materials[prim.material]
+    pbr = material.pbrMetallicRoughness
+    assert material.name == "Skin" and pbr.baseColorFactor == pytest.approx([*surface.SKIN_COLOR, 1.0])
+    assert pbr.metallicFactor == 0.0 and pbr.roughnessFactor == pytest.approx(0.6)
 
 
 def test_mp3_is_in_sync_with_the_motion(clip, tmp_path):
@@ -240,7 +302,7 @@ def test_validate_glb_passes_khronos_and_every_check(clip, tmp_path):
     assert report.ok, report.to_text()
     names = {c.name for c in report.checks}
     assert {"gltf-validator", "time samples", "reconstruction", "audio sync", "embedded audio duration"} <= names
-    assert "0 errors" in report.check("gltf-validator").detail
+    assert "0 errors, 0 warnings" in report.check("gltf-validator").detail
     assert "against the reference" in report.check("reconstruction").detail
     # a reference the file does not reproduce fails the reconstruction check
     moved = clip.vertices.copy()

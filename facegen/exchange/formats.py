@@ -37,12 +37,12 @@ class Format:
 
 FORMATS = (
     Format("USD", "facegen.exchange.usd", (".usda", ".usdc", ".usd"),
-           ("mode", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.usd",
+           ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.usd",
            streams=True, whole_clip=("mode", "blendshapes")),  # blendshapes: a PCA over the whole clip
     Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True),
-    Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"), ("morph_targets", "tolerance", "meters_per_unit"),
-           "facegen.validate.gltf"),
-    Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "morph_targets", "tolerance", "meters_per_unit"),
+    Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"),
+           ("rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.gltf"),
+    Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"),
            "facegen.validate.usd"),
 )
 
