@@ -44,6 +44,9 @@ FORMATS = (
            ("rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.gltf"),
     Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"),
            "facegen.validate.usd"),
+    # ARKit's 52 shape weights per frame (fitted on facegen's face): Audio2Face JSON, Live Link Face CSV
+    Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit", streams=True),
+    Format("Live Link Face CSV", "facegen.exchange.arkit_csv", (".csv",), (), "facegen.validate.arkit", streams=True),
 )
 
 

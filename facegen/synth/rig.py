@@ -38,18 +38,18 @@ EXPRESSIONS: dict[str, dict[str, float]] = {
 
 EYE_SPACING_CM = 6.3  # distance between the eyeball centres of the canonical face
 JAW_MAX_ANGLE = 0.33  # rad at jaw_open = 1 (about 2 cm between the lips)
-_REQUIRED = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
+RIG_REGIONS = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
              "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin",
              "right_lower_lid_margin", "brows", "forehead", "cheeks")
 
 
-def _falloff(d: np.ndarray, radius: float) -> np.ndarray:
+def falloff(d: np.ndarray, radius: float) -> np.ndarray:
     """1 at distance 0, smoothly 0 at `radius` and beyond (inf -> 0)."""
     t = np.clip(1.0 - np.nan_to_num(d, posinf=1e9) / radius, 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
 
 
-def _rotate_x(pos: np.ndarray, idx: np.ndarray, centre: np.ndarray, angle: np.ndarray) -> None:
+def rotate_x(pos: np.ndarray, idx: np.ndarray, centre: np.ndarray, angle: np.ndarray) -> None:
     """Rotate the vertices `idx` of pos [T, V, 3] in place about x-parallel axes through `centre`
     ([3] or [len(idx), 3]) by `angle` [T, len(idx)] rad; positive angles move points in front of the
     centre (+z) downwards (-y)."""
@@ -61,21 +61,32 @@ def _rotate_x(pos: np.ndarray, idx: np.ndarray, centre: np.ndarray, angle: np.nd
     pos[:, idx, 2] = centre[None, :, 2] + y * s + z * c
 
 
-def _fit_centre(points: np.ndarray) -> np.ndarray:
-    """Centre of the axis-aligned ellipsoid through `points` (least squares)."""
+def fit_ellipsoid(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre [3] and semi-axes [3] of the axis-aligned ellipsoid through `points` (least squares)."""
     p = np.asarray(points, np.float64)
     a = np.concatenate([p**2, p], 1)
     coef, *_ = np.linalg.lstsq(a, np.ones(len(p)), rcond=None)
-    return -coef[3:] / (2 * coef[:3])
+    centre = -coef[3:] / (2 * coef[:3])
+    return centre, np.sqrt((1 + np.sum(coef[:3] * centre**2)) / coef[:3])
 
 
 class Rig:
-    """Deformers on a face made by facegen.synth.face (any speaker: the regions carry the layout)."""
+    """Deformers on a face made by facegen.synth.face (any speaker: the regions carry the layout).
+
+    Besides posing, it keeps what other deformers of the face build on (facegen.arkit.shapes): `cm` (mesh
+    units per cm), `distance` (graph distance in cm) and `smooth`, the per-vertex weight fields in `fields`
+    (mouth: `mouth_x` cm across the mouth from its centre, `upper_side`, `d_up`/`d_lo`/`d_m` cm from the
+    upper / lower / either lip margin, `lat`, `near`, `peri`, `w_up`, `w_lo`; `brow`, `corner` and `cheek`
+    with their distances `d_corner` and `d_cheek`, `squint` (below the lower lids), `jaw` (the jaw's
+    rotation weight)), `mouth_centre` (mesh units), `mouth_half` (cm), the eyeballs' `eye_centres` / `eye_axes` and
+    the lid rotation arrays (`lid_idx`, `lid_upper`, `lid_w`, `lid_alpha`: the angle that closes each lid
+    column, `lid_centre`) used with `rotate_x`.
+    """
 
     channels: tuple[str, ...] = CHANNELS
 
     def __init__(self, mesh: Mesh) -> None:
-        missing = [r for r in _REQUIRED if r not in mesh.regions]
+        missing = [r for r in RIG_REGIONS if r not in mesh.regions]
         if missing:
             raise FacegenError(f"the mesh lacks the rig regions {', '.join(missing)}: "
                                "use a face from facegen.synth.face (make_face or speaker_face)")
@@ -85,15 +96,13 @@ class Rig:
         V = len(self.template)
         t = self.template
         # scale: mesh units per cm, from the distance between the eyeball centres
-        self.eye_centres = np.stack([_fit_centre(t[reg["left_eyeball"]]), _fit_centre(t[reg["right_eyeball"]])])
+        eyes = [fit_ellipsoid(t[reg[f"{s}_eyeball"]]) for s in ("left", "right")]
+        self.eye_centres = np.stack([c for c, _ in eyes])
+        self.eye_axes = np.stack([a for _, a in eyes])
         cm = float(np.linalg.norm(self.eye_centres[0] - self.eye_centres[1])) / EYE_SPACING_CM
         self.cm = cm
-        graph = self._graph()
-
-        def dist(sources: np.ndarray, sources_out: bool = False):
-            d, _, src = dijkstra(graph, directed=False, indices=sources, min_only=True,
-                                 return_predecessors=True)
-            return (d / cm, src) if sources_out else d / cm
+        self._graph = self._build_graph()
+        dist = self.distance
 
         mu, ml = reg["mouth_upper_margin"], reg["mouth_lower_margin"]
         d_up, src_up = dist(mu, True)
@@ -111,17 +120,17 @@ class Rig:
             return np.stack([np.broadcast_to(dx, (V,)), np.broadcast_to(dy, (V,)),
                              np.broadcast_to(dz, (V,))], 1) * cm
 
-        sm = self._smooth
-        near = sm(_falloff(d_m, 0.9))  # the lips themselves
-        peri = sm(_falloff(d_m, 2.4))  # lips and the skin around them
-        w_up = sm(_falloff(d_up, 1.5) * upper_side)
-        w_lo = sm(_falloff(d_lo, 1.5) * ~upper_side)
+        sm = self.smooth
+        near = sm(falloff(d_m, 0.9))  # the lips themselves
+        peri = sm(falloff(d_m, 2.4))  # lips and the skin around them
+        w_up = sm(falloff(d_up, 1.5) * upper_side)
+        w_lo = sm(falloff(d_lo, 1.5) * ~upper_side)
         sgn = np.where(upper_side, 1.0, -1.0)
         opening = np.clip(1 - (X / half) ** 2, 0, 1)
-        off["lip_close"] = field(dz=-0.12 * sm(_falloff(d_m, 0.6)))  # pressed (the seal itself is below)
+        off["lip_close"] = field(dz=-0.12 * sm(falloff(d_m, 0.6)))  # pressed (the seal itself is below)
         Xc = np.clip(X, -half, half)
-        peri_round = sm(_falloff(d_m, 1.9))
-        wide_round = sm(_falloff(d_m, 3.0))
+        peri_round = sm(falloff(d_m, 1.9))
+        wide_round = sm(falloff(d_m, 3.0))
         off["lip_round"] = field(dx=-0.36 * Xc * wide_round, dy=sgn * 0.22 * near * opening**0.7,
                                  dz=0.5 * peri_round**2 + 0.25 * near)
         off["lip_wide"] = field(dx=0.24 * Xc * peri, dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near,
@@ -133,30 +142,36 @@ class Rig:
 
         # upper face
         d_brow = dist(reg["brows"])
-        w_brow = sm(_falloff(d_brow, 1.3))
+        w_brow = sm(falloff(d_brow, 1.3))
         Y = (t[:, 1] - t[reg["brows"], 1].mean()) / cm  # cm above the brows
-        above = sm(_falloff(d_brow, 5.0)) * np.clip(Y / 1.2, 0, 1) ** 2 * (3 - 2 * np.clip(Y / 1.2, 0, 1))
+        above = sm(falloff(d_brow, 5.0)) * np.clip(Y / 1.2, 0, 1) ** 2 * (3 - 2 * np.clip(Y / 1.2, 0, 1))
         ramp = np.clip((Y - 0.6) / 0.8, 0, 1)
-        wrinkle = 0.05 * np.sin(2 * np.pi * (Y - 0.6) / 1.1) * _falloff(d_brow, 4.5) * ramp * ramp * (3 - 2 * ramp)
+        wrinkle = 0.05 * np.sin(2 * np.pi * (Y - 0.6) / 1.1) * falloff(d_brow, 4.5) * ramp * ramp * (3 - 2 * ramp)
         off["brow_raise"] = field(dy=0.6 * np.maximum(w_brow, 0.75 * above), dz=wrinkle)
         Xe = t[:, 0] / cm
         inner = np.clip(1.3 - np.abs(Xe) / 4.0, 0.3, 1.0)
         off["brow_frown"] = field(dx=-0.35 * np.tanh(Xe / 0.8) * inner * w_brow, dy=-0.45 * w_brow * inner,
                                   dz=0.1 * w_brow)
         d_corner = dist(np.array([mu[0], mu[-1], ml[0], ml[-1]]))
-        w_corner = sm(_falloff(d_corner, 2.6))
+        w_corner = sm(falloff(d_corner, 2.6))
         cheeks = reg["cheeks"]
         centres = [cheeks[np.argmin(np.linalg.norm(t[cheeks] - t[cheeks[side]].mean(0), axis=1))]
                    for side in (t[cheeks, 0] > 0, t[cheeks, 0] < 0)]
-        w_cheek = sm(_falloff(dist(np.array(centres)), 3.2))
+        d_cheek = dist(np.array(centres))
+        w_cheek = sm(falloff(d_cheek, 3.2))
         lids_lo = np.concatenate([reg["left_lower_lid_margin"], reg["right_lower_lid_margin"]])
         lids_up = np.concatenate([reg["left_upper_lid_margin"], reg["right_upper_lid_margin"]])
         d_lid_up, src_lid_up = dist(lids_up, True)
         d_lid_lo, src_lid_lo = dist(lids_lo, True)
         lower_lid = d_lid_lo < d_lid_up
-        w_squint = sm(_falloff(d_lid_lo, 0.9) * lower_lid)
+        w_squint = sm(falloff(d_lid_lo, 0.9) * lower_lid)
         off["cheek_raise"] = field(dx=0.4 * np.tanh(X / 1.0) * w_corner, dy=0.45 * w_corner + 0.3 * w_cheek
                                    + 0.12 * w_squint, dz=-0.12 * w_corner + 0.25 * w_cheek)
+        self.mouth_centre, self.mouth_half = mouth_centre, half
+        self.fields = {"mouth_x": X, "upper_side": upper_side, "d_up": d_up, "d_lo": d_lo, "d_m": d_m,
+                       "lat": lat, "near": near, "peri": peri, "w_up": w_up, "w_lo": w_lo, "brow": w_brow,
+                       "corner": w_corner, "d_corner": d_corner,
+                       "cheek": w_cheek, "d_cheek": d_cheek, "squint": w_squint}
         self._linear = [c for c in CHANNELS if c in off]
         self._offsets = np.stack([off[c] for c in self._linear]).reshape(len(self._linear), -1).astype(np.float32)
         self._linear_index = np.array([CHANNELS.index(c) for c in self._linear])
@@ -169,9 +184,10 @@ class Rig:
         in_jaw[reg["jaw"]] = True
         free = ~in_jaw & ~((d_up < 0.6) & upper_side)  # not the jaw, not the upper lip at the slit
         ramp = 1.8
-        w_jaw = np.where(in_jaw, 0.5 + 0.5 * (1 - _falloff(dist(np.nonzero(free)[0]), ramp)),
-                         0.5 * _falloff(dist(reg["jaw"]), ramp))
+        w_jaw = np.where(in_jaw, 0.5 + 0.5 * (1 - falloff(dist(np.nonzero(free)[0]), ramp)),
+                         0.5 * falloff(dist(reg["jaw"]), ramp))
         w_jaw = sm(w_jaw, pin=np.concatenate([mu, ml]))
+        self.fields["jaw"] = w_jaw
         self._jaw_idx = np.nonzero(w_jaw > 1e-4)[0]
         self._jaw_w = w_jaw[self._jaw_idx]
 
@@ -192,18 +208,18 @@ class Rig:
             close_angle[up] = a
             close_angle[lo] = a
         lid_margins = np.concatenate([lids_up, lids_lo])
-        w_lid_up = sm(_falloff(d_lid_up, 1.0) * ~lower_lid, pin=lid_margins)
-        w_lid_lo = sm(_falloff(d_lid_lo, 0.6) * lower_lid, pin=lid_margins)
+        w_lid_up = sm(falloff(d_lid_up, 1.0) * ~lower_lid, pin=lid_margins)
+        w_lid_lo = sm(falloff(d_lid_lo, 0.6) * lower_lid, pin=lid_margins)
         src = np.where(lower_lid, src_lid_lo, src_lid_up)
         lid_idx = np.nonzero(((w_lid_up > 1e-4) & ~lower_lid) | ((w_lid_lo > 1e-4) & lower_lid))[0]
-        self._lid_idx = lid_idx
-        self._lid_upper = ~lower_lid[lid_idx]
-        self._lid_w = np.where(self._lid_upper, w_lid_up[lid_idx], w_lid_lo[lid_idx])
-        self._lid_alpha = close_angle[src[lid_idx]]
-        self._lid_centre = self.eye_centres[side_of[src[lid_idx]]]
+        self.lid_idx = lid_idx
+        self.lid_upper = ~lower_lid[lid_idx]
+        self.lid_w = np.where(self.lid_upper, w_lid_up[lid_idx], w_lid_lo[lid_idx])
+        self.lid_alpha = close_angle[src[lid_idx]]
+        self.lid_centre = self.eye_centres[side_of[src[lid_idx]]]
 
         # lip seal: every lip vertex follows its nearest margin vertex towards the meeting line
-        seal_w = sm(_falloff(d_m, 1.1), pin=np.concatenate([mu, ml]))
+        seal_w = sm(falloff(d_m, 1.1), pin=np.concatenate([mu, ml]))
         seal_idx = np.nonzero(seal_w > 1e-4)[0]
         self._seal_idx = seal_idx
         self._seal_w = seal_w[seal_idx]
@@ -215,7 +231,14 @@ class Rig:
         self._seal_upper = upper_side[seal_idx]
         self._mu, self._ml = mu, ml
 
-    def _graph(self):
+    def distance(self, sources: np.ndarray, sources_out: bool = False):
+        """Graph distance (cm) of every vertex from the nearest of `sources`; with `sources_out`, also
+        which source is nearest."""
+        d, _, src = dijkstra(self._graph, directed=False, indices=sources, min_only=True,
+                             return_predecessors=True)
+        return (d / self.cm, src) if sources_out else d / self.cm
+
+    def _build_graph(self):
         """The mesh's edges plus its 2-ring (Euclidean lengths): graph distances close to geodesic ones
         without the diamond-shaped bias of a grid's edges. Also sets the neighbour-average operator."""
         f = self.faces
@@ -232,7 +255,7 @@ class Rig:
         w = np.linalg.norm(self.template[i] - self.template[j], axis=1) + 1e-12
         return coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
 
-    def _smooth(self, w: np.ndarray, iterations: int = 12, pin: np.ndarray | None = None) -> np.ndarray:
+    def smooth(self, w: np.ndarray, iterations: int = 12, pin: np.ndarray | None = None) -> np.ndarray:
         """Average each value with its neighbours' (`iterations` times): removes creases of the
         distance falloffs; `pin` vertices keep their values."""
         out = np.asarray(w, np.float64).copy()
@@ -254,16 +277,16 @@ class Rig:
         pos = self.template.astype(np.float32)[None] + (w[:, self._linear_index] @ self._offsets).reshape(T, V, 3)
         # jaw
         ang = ch["jaw_open"][:, None] * np.float32(JAW_MAX_ANGLE) * self._jaw_w[None, :].astype(np.float32)
-        _rotate_x(pos, self._jaw_idx, self.hinge.astype(np.float32), ang)
+        rotate_x(pos, self._jaw_idx, self.hinge.astype(np.float32), ang)
         # lids: blink closes, widen opens (less while blinking), frown narrows a little
         blink = ch["blink"][:, None]
         widen = ch["lid_widen"][:, None] * (1 - blink)
         frown = ch["brow_frown"][:, None] * (1 - blink)
-        up = self._lid_upper[None, :]
-        theta = np.where(up, blink * 0.85 * self._lid_alpha - widen * 0.2 + frown * 0.05,
-                         -blink * 0.15 * self._lid_alpha + widen * 0.07)
-        theta = theta * self._lid_w[None, :]
-        _rotate_x(pos, self._lid_idx, self._lid_centre.astype(np.float32), theta.astype(np.float32))
+        up = self.lid_upper[None, :]
+        theta = np.where(up, blink * 0.85 * self.lid_alpha - widen * 0.2 + frown * 0.05,
+                         -blink * 0.15 * self.lid_alpha + widen * 0.07)
+        theta = theta * self.lid_w[None, :]
+        rotate_x(pos, self.lid_idx, self.lid_centre.astype(np.float32), theta.astype(np.float32))
         # lip seal
         close = ch["lip_close"]
         if np.any(close > 0):

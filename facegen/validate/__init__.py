@@ -2,7 +2,8 @@
 
 Each check has a name, ok, a one-line detail and a severity. An "error" check that fails makes the report
 fail; a "warning" is shown but never fails it. The format table (exchange/formats.py) names each format's
-checker module here (usd.py for USD and USDZ, npy.py, gltf.py); each has `check(report, path, expected)`,
+checker module here (usd.py for USD and USDZ, npy.py, gltf.py, arkit.py for the ARKit weight files: Audio2Face
+JSON and Live Link Face CSV); each has `check(report, path, expected)`,
 and the checks they share are in checks.py.
 """
 

@@ -1,0 +1,130 @@
+"""ARKit's 52 blend shapes as offsets of facegen's procedural face: `arkit_shapes(mesh) -> Shapes`, cached.
+
+The deformations themselves are in facegen.arkit.deformers (on facegen.synth.rig's Rig). Building them takes
+about a second on the 23,370-vertex face, so the result is memoised in the process and stored on disk
+(safetensors under $XDG_CACHE_HOME/facegen/arkit, default ~/.cache), keyed by a digest of the mesh's
+vertices, faces and regions; a damaged or foreign cache file is rebuilt, an unwritable cache folder only
+costs the rebuild.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from facegen.arkit.names import ARKIT_NAMES
+from facegen.atomic import atomic_path
+from facegen.errors import FacegenError
+from facegen.mesh import Mesh
+
+SHAPES_VERSION = 1  # bump when a deformation changes: old cache files are then ignored
+REGIONS = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
+           "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin", "right_lower_lid_margin",
+           "brows", "forehead", "cheeks", "nose")  # the rig's regions and the nose (noseSneer)
+_MEMO: dict[str, Shapes] = {}
+_MEMO_SIZE = 4
+
+
+@dataclass(frozen=True)
+class Shapes:
+    """The 52 ARKit shapes of one face: `offsets` [52, V, 3] float32 (shape at weight 1 minus the template,
+    mesh units, read-only), in `names` order (ARKIT_NAMES); `mm` mesh units per millimetre."""
+
+    names: tuple[str, ...]
+    offsets: np.ndarray
+    mm: float
+
+    def offset(self, name: str) -> np.ndarray:
+        """The offsets [V, 3] of the shape called `name` (ARKit lowerCamel)."""
+        return self.offsets[self.names.index(name)]
+
+
+def mesh_digest(mesh: Mesh) -> str:
+    """A hash of the mesh's vertices, faces and regions (and SHAPES_VERSION): the cache key."""
+    h = hashlib.sha256(f"arkit-shapes-{SHAPES_VERSION}".encode())
+    h.update(np.ascontiguousarray(mesh.vertices, np.float32).tobytes())
+    h.update(np.ascontiguousarray(mesh.faces, np.int64).tobytes())
+    for name in sorted(mesh.regions):
+        h.update(name.encode() + b"\0")
+        h.update(np.ascontiguousarray(mesh.regions[name], np.int64).tobytes())
+    return h.hexdigest()[:24]
+
+
+def cache_folder() -> Path:
+    """Where built shapes are stored: $XDG_CACHE_HOME/facegen/arkit (default ~/.cache/facegen/arkit)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "facegen" / "arkit"
+
+
+def _read(path: Path, num_vertices: int) -> Shapes | None:
+    from safetensors import safe_open
+
+    try:
+        with safe_open(str(path), "np") as f:
+            names = tuple((f.metadata() or {}).get("names", "").split(","))
+            offsets = f.get_tensor("offsets")
+            mm = float(f.get_tensor("mm")[0])
+    except Exception:  # noqa: BLE001 - a damaged cache file is simply rebuilt
+        return None
+    if (names != ARKIT_NAMES or offsets.shape != (len(ARKIT_NAMES), num_vertices, 3)
+            or offsets.dtype != np.float32 or not np.isfinite(offsets).all() or not mm > 0):
+        return None
+    return _frozen(offsets, mm)
+
+
+def _write(path: Path, shapes: Shapes) -> None:
+    from safetensors.numpy import save_file
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            save_file({"offsets": shapes.offsets, "mm": np.array([shapes.mm], np.float64)}, str(tmp),
+                      metadata={"names": ",".join(shapes.names)})
+    except (OSError, FacegenError):
+        pass  # no cache: the next process builds the shapes again
+
+
+def _frozen(offsets: np.ndarray, mm: float) -> Shapes:
+    offsets = np.ascontiguousarray(offsets, np.float32)
+    offsets.setflags(write=False)
+    return Shapes(ARKIT_NAMES, offsets, float(mm))
+
+
+def check_regions(mesh: Mesh) -> None:
+    """FacegenError naming the regions the shapes need that `mesh` lacks."""
+    missing = [r for r in REGIONS if r not in mesh.regions]
+    if missing:
+        raise FacegenError(f"the face lacks the regions {', '.join(missing)} that the ARKit shapes are built on: "
+                           "use facegen's procedural face (or a mesh of its topology with its region files)")
+
+
+def build_shapes(mesh: Mesh) -> Shapes:
+    """The 52 shapes of `mesh`, built now (no cache): a face from facegen.synth.face with the rig's regions."""
+    from facegen.arkit.deformers import shape_offsets
+    from facegen.synth.rig import Rig
+
+    check_regions(mesh)
+    rig = Rig(mesh)
+    shapes = shape_offsets(rig, {k: np.asarray(v, np.int64) for k, v in mesh.regions.items()})
+    return _frozen(np.stack([shapes[name] for name in ARKIT_NAMES]), rig.cm / 10.0)
+
+
+def arkit_shapes(mesh: Mesh) -> Shapes:
+    """ARKit's 52 blend shapes on `mesh` (facegen's procedural face, any speaker): memoised in the process
+    and cached on disk by the mesh's digest. FacegenError when the mesh lacks the regions they need."""
+    key = mesh_digest(mesh)
+    if key in _MEMO:
+        return _MEMO[key]
+    check_regions(mesh)
+    path = cache_folder() / f"shapes-{key}.safetensors"
+    shapes = _read(path, len(mesh.vertices)) if path.is_file() else None
+    if shapes is None:
+        shapes = build_shapes(mesh)
+        _write(path, shapes)
+    if len(_MEMO) >= _MEMO_SIZE:
+        _MEMO.pop(next(iter(_MEMO)))
+    _MEMO[key] = shapes
+    return shapes

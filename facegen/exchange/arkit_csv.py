@@ -1,0 +1,69 @@
+"""Live Link Face CSV: the animation as ARKit's 52 shape weights per frame (arkit/solve.py's fit), in the
+layout Epic's Live Link Face app records and Unreal's LiveLinkFaceImporter, Maya/Blender importers read.
+
+    Timecode,BlendShapeCount,EyeBlinkLeft,...,TongueOut,HeadYaw,HeadPitch,HeadRoll,LeftEyeYaw,...,RightEyeRoll
+    00:00:00:00.000,61,0.00000,...
+
+The columns are `facegen.arkit.names.LIVE_LINK_COLUMNS` (the weights are placed by name); one row per frame:
+the timecode `HH:MM:SS:FF.mmm` (FF: the frame within its second at the clip's fps, the sub-frame part .000),
+BlendShapeCount 61 (the 52 shapes and 9 rotations, as the app writes), the weights in [0, 1] and the head
+and eye rotations, 0 (facegen moves no head or eyeballs by rotation). The file holds no fps: readers take it
+from the timecodes or ask. The audio goes beside the file as a WAV sidecar.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from facegen.animation import Animation, check_animation
+from facegen.arkit.names import LIVE_LINK_COLUMNS, LIVE_LINK_ROTATIONS, arkit_name
+from facegen.arkit.solve import fit_arkit
+from facegen.exchange.wav import atomic_with_sidecar
+
+TIMECODE = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,})(?:\.(\d+))?$")
+
+
+def timecode(frame: int, fps: float) -> str:
+    """Live Link Face's `HH:MM:SS:FF.mmm` for `frame` at `fps` (FF counts the frames within the second)."""
+    second = math.floor(frame / fps + 1e-9)
+    within = frame - math.ceil(second * fps - 1e-9)
+    return f"{second // 3600:02d}:{second // 60 % 60:02d}:{second % 60:02d}:{within:02d}.000"
+
+
+def parse_timecode(text: str) -> tuple[int, int, float] | None:
+    """(whole seconds, frame within the second, sub-frame fraction) of a timecode, or None if malformed."""
+    m = TIMECODE.match(text.strip())
+    if m is None:
+        return None
+    hours, minutes, seconds, frame, sub = m.groups()
+    return int(hours) * 3600 + int(minutes) * 60 + int(seconds), int(frame), float(f"0.{sub or 0}")
+
+
+def write(
+    anim: Animation,
+    path: str | os.PathLike,
+    *,
+    write_audio: bool = True,
+    audio_source: str | os.PathLike | None = None,
+) -> list[Path]:
+    """Fit the ARKit weights of `anim` and write them as Live Link Face CSV with, when there is audio, a WAV
+    sidecar; return the files. A template without the rig's regions is a FacegenError (nothing written)."""
+    check_animation(anim)
+    fit = fit_arkit(anim)
+    shapes = LIVE_LINK_COLUMNS[2 : len(LIVE_LINK_COLUMNS) - len(LIVE_LINK_ROTATIONS)]
+    order = [fit.names.index(arkit_name(column)) for column in shapes]
+    count = len(shapes) + len(LIVE_LINK_ROTATIONS)
+    rotations = ",0" * len(LIVE_LINK_ROTATIONS)
+    weights = np.char.mod("%.5f", fit.weights[:, order].astype(np.float64))
+    lines = [",".join(LIVE_LINK_COLUMNS)]
+    lines += [f"{timecode(t, anim.fps)},{count},{','.join(row)}{rotations}" for t, row in enumerate(weights)]
+    path = Path(path)
+    audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
+    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
+        tmp.write_text("\n".join(lines) + "\n")
+    return [path] if wav is None else [path, wav]

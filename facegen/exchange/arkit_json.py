@@ -1,0 +1,63 @@
+"""Audio2Face blend-shape JSON: the animation as ARKit's 52 shape weights per frame (arkit/solve.py's fit).
+
+The layout is NVIDIA Audio2Face's blend-shape export, which ARKit-aware importers (Blender add-ons, three.js and
+Babylon.js loaders, Unreal plug-ins) read by key:
+
+    {"exportFps": 25, "trackPath": "clip.wav", "numPoses": 52, "numFrames": T,
+     "facsNames": ["eyeBlinkLeft", ...],            ARKit's lowerCamel names, in ARKit's order
+     "weightMat": [[52 weights in [0, 1]], ...],     one row per frame
+     "facegen": {"version", "model", "lip_error_mm", "face_error_mm", "audio"}}
+
+`trackPath` names the audio track as Audio2Face does (here the WAV sidecar beside the file, "" without audio);
+the extra "facegen" key holds the fit's reconstruction errors and where the weights came from. Weights are
+rounded to 5 decimals (1e-5 of the full range) to keep the file small.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from facegen import __version__
+from facegen.animation import Animation, check_animation
+from facegen.arkit.solve import fit_arkit
+from facegen.exchange.wav import atomic_with_sidecar
+
+DECIMALS = 5
+
+
+def write(
+    anim: Animation,
+    path: str | os.PathLike,
+    *,
+    write_audio: bool = True,
+    audio_source: str | os.PathLike | None = None,
+) -> list[Path]:
+    """Fit the ARKit weights of `anim` and write them as Audio2Face JSON with, when there is audio, a WAV
+    sidecar; return the files. A template without the rig's regions is a FacegenError (nothing written)."""
+    check_animation(anim)
+    fit = fit_arkit(anim)
+    path = Path(path)
+    audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
+    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
+        track = wav.name if wav is not None else ""
+        doc = {
+            "exportFps": int(anim.fps) if float(anim.fps).is_integer() else float(anim.fps),
+            "trackPath": track,
+            "numPoses": len(fit.names),
+            "numFrames": len(fit.weights),
+            "facsNames": list(fit.names),
+            "weightMat": fit.weights.astype(np.float64).round(DECIMALS).tolist(),
+            "facegen": {
+                "version": __version__,
+                "model": anim.metadata.get("model"),
+                "lip_error_mm": round(fit.lip_error_mm, 4),
+                "face_error_mm": round(fit.face_error_mm, 4),
+                "audio": track or None,
+            },
+        }
+        tmp.write_text(json.dumps(doc, separators=(",", ":")) + "\n")
+    return [path] if wav is None else [path, wav]
