@@ -68,6 +68,10 @@ def cli(debug: bool) -> None:
               help=f"Output file: {' '.join(extensions())}.")
 @click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
               help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
+@click.option("--rig", type=click.Choice(["pca", "arkit"]),
+              help="glTF / USD: the morph targets: pca (default: a PCA of the clip, the fewest targets) or arkit "
+                   "(Apple's 52 ARKit blend shapes, named as ARKit names them, with their fitted weights; "
+                   "USD: UsdSkel blend shapes).")
 @click.option("--morph-targets", metavar="K|all", callback=_morph_targets,
               help="glTF / USD blendshapes: number of PCA morph targets (default: as many as the tolerance "
                    "needs), or 'all' for one per frame (short clips).")
@@ -79,7 +83,7 @@ def cli(debug: bool) -> None:
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, usd_mode,
-            morph_targets, tolerance, preview, device, quiet):
+            rig, morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
     from facegen.exchange import check_write_options, format_module, format_of, write_animation
@@ -88,9 +92,18 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
     check_writable(output)
-    options = {k: v for k, v in (("mode", usd_mode), ("morph_targets", morph_targets), ("tolerance", tolerance))
-               if v is not None}
+    options = {k: v for k, v in (("mode", usd_mode), ("rig", rig), ("morph_targets", morph_targets),
+                                 ("tolerance", tolerance)) if v is not None}
     check_write_options(output, options)
+    if rig == "arkit":  # the face must have the rig's regions: checked on the model's template before any work
+        from facegen.bundle import load_bundle
+        from facegen.exchange.basis import check_rig
+        from facegen.pipeline import resolve_template
+
+        model = load_bundle(model)
+        check_rig(rig, resolve_template(model, template))
+        if "mode" in format_of(output).options:
+            options.setdefault("mode", "blendshapes")  # USD: the ARKit shapes are UsdSkel blend shapes
     if preview:
         from facegen.render import check_output
 

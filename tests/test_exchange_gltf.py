@@ -371,3 +371,102 @@ def test_input_audio_beside_the_output_is_kept(clip, tmp_path):
     files = write_animation(clip, tmp_path / "clip.glb", audio_source=source)
     assert files[0] == tmp_path / "clip.glb" and source.read_bytes() == before
     assert gltf.GltfFile(tmp_path / "clip.glb").mp3_audio() is not None
+
+
+# ---- --rig arkit ---------------------------------------------------------------------------------------------
+
+
+def test_arkit_rig_glb_has_the_52_named_shapes_and_passes_khronos(clip, tmp_path):
+    _node_ready()
+    from facegen.arkit.names import ARKIT_NAMES
+    from facegen.arkit.solve import fit_arkit
+    from facegen.validate import validate
+
+    out = tmp_path / "arkit.glb"
+    write_animation(clip, out, rig="arkit")
+    doc = _doc(out)
+    assert doc.meshes[0].extras["targetNames"] == list(ARKIT_NAMES)  # no "rest": the template is the base
+    decoded = gltf.decode(out)
+    fit = fit_arkit(clip)
+    assert np.array_equal(decoded["base"], clip.template)
+    assert np.allclose(decoded["targets"], fit.shapes.offsets, atol=1e-7)
+    assert np.allclose(decoded["weights"], fit.weights)
+    assert 0 <= decoded["weights"].min() <= decoded["weights"].max() <= 1
+    jaw_open = decoded["weights"][:, ARKIT_NAMES.index("jawOpen")]
+    assert jaw_open.max() > 0.2 and int(np.argmax(jaw_open)) in range(_open_frame(clip) - 2, _open_frame(clip) + 3)
+    info = doc.asset.extras["facegen"]
+    assert info["rig"] == "arkit" and info["morphTargets"] == 52
+    assert info["lipErrorMm"] == pytest.approx(fit.lip_error_mm)
+    assert info["faceErrorMm"] == pytest.approx(fit.face_error_mm)
+    error = float(np.linalg.norm(gltf.reconstruct(decoded) - clip.vertices, axis=2).max())
+    assert error <= info["reconstructionErrorUnits"] * (1 + 1e-5) + 1e-7
+    np.save(tmp_path / "source.npy", clip.vertices.reshape(clip.num_frames, -1))
+    report = validate(out, template=clip.mesh, fps=25.0, reference=tmp_path / "source.npy")
+    assert report.ok and report.warnings == [], report.to_text()
+    assert "0 errors, 0 warnings" in report.check("gltf-validator").detail
+    assert "against the reference" in report.check("reconstruction").detail
+    rig = report.check("rig").detail
+    assert rig.startswith("ARKit: 52 of 52 shapes (eyeBlinkLeft, ") and "tongueOut)" in rig and "lip error" in rig
+
+
+def test_rig_option_errors(clip, tmp_path, grid_mesh):
+    from helpers import make_animation
+
+    bad = {
+        "unknown rig": (clip, "x.glb", {"rig": "metahuman"}, "unknown rig 'metahuman'"),
+        "pca sizing": (clip, "x.glb", {"rig": "arkit", "morph_targets": 8}, "--morph-targets size the PCA basis"),
+        "usd points": (clip, "x.usda", {"rig": "arkit", "mode": "points"}, "drop --usd-mode points"),
+        "other format": (clip, "x.npy", {"rig": "arkit"}, "--rig does not apply to .npy files"),
+        "no regions": (make_animation(grid_mesh, frames=5), "x.glb", {"rig": "arkit"}, "region"),
+    }
+    for name, (anim, file, options, message) in bad.items():
+        with pytest.raises(FacegenError, match=message) as info:
+            write_animation(anim, tmp_path / file, **options)
+        assert "\n" not in str(info.value), name
+    assert list(tmp_path.iterdir()) == []
+
+
+def _cli(*args) -> subprocess.CompletedProcess:
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "facegen", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, check=False)
+
+
+def test_cli_rig_is_checked_before_any_work(tmp_path, grid_mesh):
+    """`--rig arkit` with a format it does not apply to, or with a model whose face lacks the rig's regions:
+    one line, exit 2, nothing written, before the audio is even read (it does not exist here)."""
+    from helpers import make_bundle
+
+    make_bundle(grid_mesh, tmp_path / "grid.safetensors")
+    missing = tmp_path / "nowhere.wav"
+    for args, message in (
+        (["-o", tmp_path / "out.npy"], "--rig does not apply to .npy files"),
+        (["-o", tmp_path / "out.glb", "--model", tmp_path / "grid.safetensors"], "region"),
+    ):
+        done = _cli("animate", missing, "--no-text", "--rig", "arkit", *args)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and message in lines[0], done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.safetensors"]
+
+
+def test_cli_animate_rig_arkit_usd_is_blendshapes(tmp_path):
+    """The whole command on synthesised speech with the built-in model: the USD holds the 52 ARKit blend
+    shapes (UsdSkel, no --usd-mode needed) and validates clean."""
+    import soundfile as sf
+
+    from facegen.arkit.names import ARKIT_NAMES
+    from facegen.espeak import synthesize
+    from facegen.exchange import usd_skel
+    from facegen.exchange.usd import find_mesh, open_stage
+
+    speech = synthesize("Open the window wide.", voice="en-us")
+    sf.write(tmp_path / "line.wav", speech.audio, speech.sample_rate)
+    out = tmp_path / "line.usdc"
+    done = _cli("animate", tmp_path / "line.wav", "--text", "Open the window wide.", "--rig", "arkit", "-o", out, "-q")
+    assert done.returncode == 0, done.stderr
+    assert usd_skel.shape_names(find_mesh(open_stage(out))) == list(ARKIT_NAMES)
+    checked = _cli("validate", out, "--json")
+    assert checked.returncode == 0, checked.stdout
+    rig = next(c for c in json.loads(checked.stdout)["checks"] if c["name"] == "rig")
+    assert rig["ok"] and rig["detail"].startswith("ARKit: 52 of 52 shapes")

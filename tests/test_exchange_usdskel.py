@@ -325,3 +325,34 @@ def test_biwi_blendshapes(tmp_path, biwi_template):
     assert report.check("vertex count").detail.startswith("23370 vertices per frame")
     back = read_animation(tmp_path / "biwi_bs.usdc", template=biwi_template)
     assert max_distance(back.vertices, anim.vertices) <= info["max_error"] + 1e-6 * biwi_template.size
+
+
+@pytest.mark.parametrize("name", ["arkit.usdc", "arkit.usdz"])
+def test_arkit_rig_blend_shapes(tmp_path, name):
+    """`rig="arkit"`: blendshapes by default, one BlendShape per ARKit shape named by ARKit's name, the
+    solver's weights; UsdSkel's own evaluation is the template plus the weighted ARKit shapes."""
+    from helpers import rig_clip
+
+    from facegen.arkit.names import ARKIT_NAMES
+    from facegen.arkit.solve import fit_arkit
+
+    anim = rig_clip(30)
+    out = tmp_path / name
+    write_animation(anim, out, rig="arkit")
+    stage = Usd.Stage.Open(str(out))
+    mesh = stage.GetPrimAtPath("/Face/Mesh")
+    assert list(UsdSkel.BindingAPI(mesh).GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
+    assert [p.name for p in UsdSkel.BindingAPI(mesh).GetBlendShapeTargetsRel().GetTargets()] == list(ARKIT_NAMES)
+    animation = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation"))
+    assert list(animation.GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
+    fit = fit_arkit(anim)
+    t = 12
+    assert np.allclose(np.asarray(animation.GetBlendShapeWeightsAttr().Get(t)), fit.weights[t])
+    expected = anim.template + np.einsum("k,kvc->vc", fit.weights[t], fit.shapes.offsets)
+    assert max_distance(usdskel_points(stage, float(t)), expected) <= 1e-5 * anim.size
+    info = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]
+    assert info["rig"] == "arkit" and info["targets"] == 52 and "tolerance" not in info
+    assert info["lip_error_mm"] == pytest.approx(fit.lip_error_mm)
+    report = validate(out)
+    assert report.ok and report.warnings == [], report.to_text()
+    assert report.check("rig").detail.startswith("ARKit: 52 of 52 shapes (eyeBlinkLeft, ")

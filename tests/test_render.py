@@ -289,8 +289,7 @@ def test_npy_of_the_default_model_renders_without_model(tmp_path):
 @pytest.mark.parametrize(
     ("name", "kwargs", "message"),
     [
-        ("clip.npy", {}, "120 per frame, and the built-in model's face has 23370: pass --model BUNDLE or "
-                         "--template MESH"),
+        ("clip.npy", {}, "120 per frame, and the built-in model's face has 23370: pass --model BUNDLE"),
         ("missing.usda", {}, "does not exist"),
         ("clip.txt", {}, "unknown extension"),
         ("broken.usda", {}, "broken.usda"),

@@ -1,9 +1,9 @@
 """The "rig" check shared by the glTF and USD-blendshapes checkers: which shapes the file's targets are.
 
   rig   the morph targets / blend shapes by name: ARKit shapes (their names through facegen.arkit.names, so
-        `blendShape1.jawOpen` or `ARKit_JawOpen` count) — all 52 expected, the missing ones listed (a
-        warning); with the fit's stated mean errors (lip vertices and whole face, mm) when the file has
-        them — or another rig (facegen's PCA targets), counted
+        `blendShape1.jawOpen` or `ARKit_JawOpen` count), every one found listed — all 52 expected, the
+        missing ones listed (a warning) — with the fit's stated mean errors (lip vertices and whole face,
+        mm) when the file has them; or another rig (facegen's PCA targets), counted
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def check_rig(report: Report, names: list[str], lip_error_mm=None, face_error_mm
     errors = "; ".join(f"{what} {value:.3g} mm" for what, value in (("lip error", lip_error_mm),
                                                                     ("face error", face_error_mm))
                        if isinstance(value, int | float))
-    detail = (f"ARKit: {len(found)} of {len(ARKIT_NAMES)} shapes ({_listed(sorted(found, key=ARKIT_NAMES.index))})"
+    detail = (f"ARKit: {len(found)} of {len(ARKIT_NAMES)} shapes ({', '.join(sorted(found, key=ARKIT_NAMES.index))})"
               + (f"; missing {_listed(missing)}" if missing else "")
               + (f"; the fit's mean {errors}" if errors else ""))
     report.add("rig", not missing, detail, "warning")
