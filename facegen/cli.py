@@ -96,6 +96,10 @@ def cli(debug: bool) -> None:
               help=f"Output file: {' '.join(extensions())}.")
 @click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
               help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
+@click.option("--rig", type=click.Choice(["pca", "arkit"]),
+              help="glTF / USD: the morph targets: pca (default: a PCA of the clip, the fewest targets) or arkit "
+                   "(Apple's 52 ARKit blend shapes, named as ARKit names them, with their fitted weights; "
+                   "USD: UsdSkel blend shapes).")
 @click.option("--morph-targets", metavar="K|all", callback=_morph_targets,
               help="glTF / USD blendshapes: number of PCA morph targets (default: as many as the tolerance "
                    "needs), or 'all' for one per frame (short clips).")
@@ -107,7 +111,7 @@ def cli(debug: bool) -> None:
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, usd_mode,
-            morph_targets, tolerance, preview, device, quiet):
+            rig, morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
     from facegen.exchange import check_write_options, format_module, format_of, write_animation
@@ -121,9 +125,18 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         check_writable(Path(output).with_suffix(".wav"))  # the sidecar WAV
     _protect_inputs([output, Path(output).with_suffix(".wav"), preview], transcript=text_file,
                     alignment=alignment, model=model, template=template)
-    options = {k: v for k, v in (("mode", usd_mode), ("morph_targets", morph_targets), ("tolerance", tolerance))
-               if v is not None}
+    options = {k: v for k, v in (("mode", usd_mode), ("rig", rig), ("morph_targets", morph_targets),
+                                 ("tolerance", tolerance)) if v is not None}
     check_write_options(output, options)
+    if rig == "arkit" or format_of(output).arkit:  # ARKit weights need the rig's regions: checked before any work
+        from facegen.bundle import load_bundle
+        from facegen.exchange.basis import check_rig
+        from facegen.pipeline import resolve_template
+
+        model = load_bundle(model)
+        check_rig("arkit", resolve_template(model, template))
+        if "mode" in format_of(output).options:
+            options.setdefault("mode", "blendshapes")  # USD: the ARKit shapes are UsdSkel blend shapes
     if preview:
         from facegen.render import check_output
 
@@ -156,7 +169,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False), help="The video (.mp4).")
 @click.option("--compare", type=click.Path(dir_okay=False),
               help="Another animation (ground truth or another model) shown beside IN with an error heat map.")
-@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Bundle whose template a .npy IN uses.")
+@click.option("--model", "-m", type=click.Path(dir_okay=False), help="Bundle whose template a .npy IN uses (default: the built-in model's, when the vertex count matches).")
 @click.option("--template", type=click.Path(dir_okay=False), help="Template mesh (PLY/OBJ) for a .npy IN.")
 @click.option("--fps", type=FPS, help="Frame rate of a .npy IN (default 25).")
 @click.option("--size", type=click.IntRange(16, 8192), default=512, show_default=True, help="Pixels per view (square).")

@@ -19,13 +19,10 @@ from helpers import rig_clip
 
 from facegen.animation import Animation
 from facegen.errors import FacegenError
-from facegen.exchange import gltf, mp3, pca, read_animation, write_animation
+from facegen.exchange import gltf, mp3, pca, read_animation, surface, write_animation
+from facegen.mesh import vertex_normals
 
 IN_CI = os.environ.get("CI", "").lower() == "true"
-
-
-
-
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +167,8 @@ def test_gltf_with_bin_equals_glb(clip, tmp_path):
     assert files == [tmp_path / "b.gltf", tmp_path / "b.bin", tmp_path / "b.wav"]
     assert json.loads((tmp_path / "b.gltf").read_text())["buffers"][0]["uri"] == "b.bin"
     a, b = read_animation(tmp_path / "a.glb"), read_animation(tmp_path / "b.gltf")
-    assert np.array_equal(a.vertices, b.vertices) and gltf.decode(tmp_path / "b.gltf")["targets"].shape[0] == 6
+    assert np.array_equal(a.vertices, b.vertices)
+    assert gltf.decode(tmp_path / "b.gltf")["targets"].shape[0] == 6 + 1  # + "rest"
 
 
 def test_all_targets_are_exact(clip, tmp_path):
@@ -179,6 +177,70 @@ def test_all_targets_are_exact(clip, tmp_path):
     back = read_animation(tmp_path / "all.glb")
     assert gltf.decode(tmp_path / "all.glb")["targets"].shape[0] == clip.num_frames
     assert np.abs(back.vertices - clip.vertices).max() < 1e-6
+
+
+def _open_frame(anim: Animation) -> int:
+    """The frame where the jaw hangs lowest."""
+    jaw = anim.regions["jaw"]
+    return int(np.argmax(-(anim.vertices[:, jaw, 1] - anim.template[jaw, 1]).mean(1)))
+
+
+def _angles(normals: np.ndarray, true: np.ndarray) -> np.ndarray:
+    unit = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.degrees(np.arccos(np.clip((unit * true).sum(1), -1.0, 1.0)))
+
+
+def test_morph_targets_carry_normal_deltas(clip, tmp_path):
+    """At the most open frame the blended normals (base + weights @ NORMAL deltas, normalised as renderers
+    do) are within 10 degrees of the true normals of the blended surface; rest-pose normals are not."""
+    out = tmp_path / "lit.glb"
+    write_animation(clip, out, write_audio=False)
+    decoded = gltf.decode(out)
+    file, prim = decoded["file"], decoded["file"].doc.meshes[0].primitives[0]
+    base = file.accessor(prim.attributes.NORMAL)
+    deltas = np.stack([file.accessor(t["NORMAL"]) for t in prim.targets])
+    t = _open_frame(clip)
+    true = vertex_normals(gltf.reconstruct(decoded)[t], decoded["faces"])
+    rest_off = int((_angles(base, true) > 10).sum())
+    blended_off = _angles(base + np.einsum("k,kvc->vc", decoded["weights"][t], deltas), true)
+    assert rest_off > 40  # the mouth really opens: rest-pose normals are wrong there
+    assert int((blended_off > 10).sum()) <= 3, f"{int((blended_off > 10).sum())} vertices > 10 degrees off"
+    assert float(np.median(blended_off)) < 0.5
+    assert np.abs(deltas).max() > 0.05 and (deltas == 0).all(axis=2).mean() > 0.3  # real deltas, kept sparse
+
+
+def test_base_mesh_is_the_template_and_frames_are_reproduced(clip, tmp_path):
+    """Static readers show the base mesh: it is the neutral face, and the weights (with a "rest" target
+    at weight 1) express every frame as offsets from it."""
+    out = tmp_path / "rest.glb"
+    write_animation(clip, out, write_audio=False)
+    decoded = gltf.decode(out)
+    assert np.array_equal(decoded["base"], clip.template)
+    names = _doc(out).meshes[0].extras["targetNames"]
+    assert names[-1] == "rest" and np.all(decoded["weights"][:, -1] == 1.0)
+    error = float(np.linalg.norm(gltf.reconstruct(decoded) - clip.vertices, axis=2).max())
+    assert error <= pca.DEFAULT_TOLERANCE * clip.size
+    assert np.array_equal(read_animation(out).template, clip.template)
+
+
+def test_uvs_and_skin_material(clip, tmp_path):
+    out = tmp_path / "skin.glb"
+    write_animation(clip, out, write_audio=False)
+    doc = _doc(out)
+    prim = doc.meshes[0].primitives[0]
+    uv = gltf.GltfFile(out).accessor(prim.attributes.TEXCOORD_0)
+    assert uv.shape == (clip.num_vertices, 2) and doc.accessors[prim.attributes.TEXCOORD_0].type == "VEC2"
+    assert uv.min() == 0.0 and uv.max() == 1.0
+    # v runs down in glTF: the forehead (top) is near v = 0, the chin near v = 1; u runs left to right
+    top, bottom = np.argmax(clip.template[:, 1]), np.argmin(clip.template[:, 1])
+    assert uv[top, 1] < 0.05 and uv[bottom, 1] > 0.95
+    left, right = np.argmin(clip.template[:, 0]), np.argmax(clip.template[:, 0])
+    assert uv[left, 0] < 0.5 < uv[right, 0]
+    assert np.allclose(uv, surface.face_uvs(clip.template) * [1, -1] + [0, 1])  # stable: the template's
+    material = doc.materials[prim.material]
+    pbr = material.pbrMetallicRoughness
+    assert material.name == "Skin" and pbr.baseColorFactor == pytest.approx([*surface.SKIN_COLOR, 1.0])
+    assert pbr.metallicFactor == 0.0 and pbr.roughnessFactor == pytest.approx(0.6)
 
 
 def test_mp3_is_in_sync_with_the_motion(clip, tmp_path):
@@ -240,7 +302,7 @@ def test_validate_glb_passes_khronos_and_every_check(clip, tmp_path):
     assert report.ok, report.to_text()
     names = {c.name for c in report.checks}
     assert {"gltf-validator", "time samples", "reconstruction", "audio sync", "embedded audio duration"} <= names
-    assert "0 errors" in report.check("gltf-validator").detail
+    assert "0 errors, 0 warnings" in report.check("gltf-validator").detail
     assert "against the reference" in report.check("reconstruction").detail
     # a reference the file does not reproduce fails the reconstruction check
     moved = clip.vertices.copy()
@@ -309,3 +371,102 @@ def test_input_audio_beside_the_output_is_kept(clip, tmp_path):
     files = write_animation(clip, tmp_path / "clip.glb", audio_source=source)
     assert files[0] == tmp_path / "clip.glb" and source.read_bytes() == before
     assert gltf.GltfFile(tmp_path / "clip.glb").mp3_audio() is not None
+
+
+# ---- --rig arkit ---------------------------------------------------------------------------------------------
+
+
+def test_arkit_rig_glb_has_the_52_named_shapes_and_passes_khronos(clip, tmp_path):
+    _node_ready()
+    from facegen.arkit.names import ARKIT_NAMES
+    from facegen.arkit.solve import fit_arkit
+    from facegen.validate import validate
+
+    out = tmp_path / "arkit.glb"
+    write_animation(clip, out, rig="arkit")
+    doc = _doc(out)
+    assert doc.meshes[0].extras["targetNames"] == list(ARKIT_NAMES)  # no "rest": the template is the base
+    decoded = gltf.decode(out)
+    fit = fit_arkit(clip)
+    assert np.array_equal(decoded["base"], clip.template)
+    assert np.allclose(decoded["targets"], fit.shapes.offsets, atol=1e-7)
+    assert np.allclose(decoded["weights"], fit.weights)
+    assert 0 <= decoded["weights"].min() <= decoded["weights"].max() <= 1
+    jaw_open = decoded["weights"][:, ARKIT_NAMES.index("jawOpen")]
+    assert jaw_open.max() > 0.2 and int(np.argmax(jaw_open)) in range(_open_frame(clip) - 2, _open_frame(clip) + 3)
+    info = doc.asset.extras["facegen"]
+    assert info["rig"] == "arkit" and info["morphTargets"] == 52
+    assert info["lipErrorMm"] == pytest.approx(fit.lip_error_mm)
+    assert info["faceErrorMm"] == pytest.approx(fit.face_error_mm)
+    error = float(np.linalg.norm(gltf.reconstruct(decoded) - clip.vertices, axis=2).max())
+    assert error <= info["reconstructionErrorUnits"] * (1 + 1e-5) + 1e-7
+    np.save(tmp_path / "source.npy", clip.vertices.reshape(clip.num_frames, -1))
+    report = validate(out, template=clip.mesh, fps=25.0, reference=tmp_path / "source.npy")
+    assert report.ok and report.warnings == [], report.to_text()
+    assert "0 errors, 0 warnings" in report.check("gltf-validator").detail
+    assert "against the reference" in report.check("reconstruction").detail
+    rig = report.check("rig").detail
+    assert rig.startswith("ARKit: 52 of 52 shapes (eyeBlinkLeft, ") and "tongueOut)" in rig and "lip error" in rig
+
+
+def test_rig_option_errors(clip, tmp_path, grid_mesh):
+    from helpers import make_animation
+
+    bad = {
+        "unknown rig": (clip, "x.glb", {"rig": "metahuman"}, "unknown rig 'metahuman'"),
+        "pca sizing": (clip, "x.glb", {"rig": "arkit", "morph_targets": 8}, "--morph-targets size the PCA basis"),
+        "usd points": (clip, "x.usda", {"rig": "arkit", "mode": "points"}, "drop --usd-mode points"),
+        "other format": (clip, "x.npy", {"rig": "arkit"}, "--rig does not apply to .npy files"),
+        "no regions": (make_animation(grid_mesh, frames=5), "x.glb", {"rig": "arkit"}, "region"),
+    }
+    for name, (anim, file, options, message) in bad.items():
+        with pytest.raises(FacegenError, match=message) as info:
+            write_animation(anim, tmp_path / file, **options)
+        assert "\n" not in str(info.value), name
+    assert list(tmp_path.iterdir()) == []
+
+
+def _cli(*args) -> subprocess.CompletedProcess:
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "facegen", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, check=False)
+
+
+def test_cli_rig_is_checked_before_any_work(tmp_path, grid_mesh):
+    """`--rig arkit` with a format it does not apply to, or with a model whose face lacks the rig's regions:
+    one line, exit 2, nothing written, before the audio is even read (it does not exist here)."""
+    from helpers import make_bundle
+
+    make_bundle(grid_mesh, tmp_path / "grid.safetensors")
+    missing = tmp_path / "nowhere.wav"
+    for args, message in (
+        (["-o", tmp_path / "out.npy"], "--rig does not apply to .npy files"),
+        (["-o", tmp_path / "out.glb", "--model", tmp_path / "grid.safetensors"], "region"),
+    ):
+        done = _cli("animate", missing, "--no-text", "--rig", "arkit", *args)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and message in lines[0], done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.safetensors"]
+
+
+def test_cli_animate_rig_arkit_usd_is_blendshapes(tmp_path):
+    """The whole command on synthesised speech with the built-in model: the USD holds the 52 ARKit blend
+    shapes (UsdSkel, no --usd-mode needed) and validates clean."""
+    import soundfile as sf
+
+    from facegen.arkit.names import ARKIT_NAMES
+    from facegen.espeak import synthesize
+    from facegen.exchange import usd_skel
+    from facegen.exchange.usd import find_mesh, open_stage
+
+    speech = synthesize("Open the window wide.", voice="en-us")
+    sf.write(tmp_path / "line.wav", speech.audio, speech.sample_rate)
+    out = tmp_path / "line.usdc"
+    done = _cli("animate", tmp_path / "line.wav", "--text", "Open the window wide.", "--rig", "arkit", "-o", out, "-q")
+    assert done.returncode == 0, done.stderr
+    assert usd_skel.shape_names(find_mesh(open_stage(out))) == list(ARKIT_NAMES)
+    checked = _cli("validate", out, "--json")
+    assert checked.returncode == 0, checked.stdout
+    rig = next(c for c in json.loads(checked.stdout)["checks"] if c["name"] == "rig")
+    assert rig["ok"] and rig["detail"].startswith("ARKit: 52 of 52 shapes")

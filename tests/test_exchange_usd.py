@@ -91,6 +91,40 @@ def test_usd_file_contents(tmp_path, grid_mesh, ext):
     assert "gone" not in meta and '"word": "hi"' in meta["words"]
 
 
+@pytest.mark.parametrize(("name", "mode"), [("p.usda", "points"), ("b.usdc", "blendshapes"), ("z.usdz", "points"),
+                                           ("zb.usdz", "blendshapes")])
+def test_uvs_display_colour_and_skin_material(tmp_path, grid_mesh, name, mode):
+    from pxr import UsdShade
+
+    from facegen.exchange.surface import SKIN_COLOR, face_uvs
+    from facegen.validate import validate
+
+    anim = make_animation(grid_mesh)
+    out = tmp_path / name
+    write_animation(anim, out, mode=mode)
+    stage = Usd.Stage.Open(str(out))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
+    st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+    assert st.GetTypeName() == Sdf.ValueTypeNames.TexCoord2fArray and st.GetInterpolation() == UsdGeom.Tokens.vertex
+    uv = np.asarray(st.Get(), np.float32)
+    assert uv.shape == (grid_mesh.num_vertices, 2) and uv.min() == 0.0 and uv.max() == 1.0
+    assert np.array_equal(uv, face_uvs(grid_mesh.vertices))
+    top, left = np.argmax(grid_mesh.vertices[:, 1]), np.argmin(grid_mesh.vertices[:, 0])
+    assert uv[top, 1] == 1.0 and uv[left, 0] < 0.5  # USD's v runs up
+    colour = mesh.GetDisplayColorPrimvar()
+    assert colour.GetInterpolation() == UsdGeom.Tokens.constant
+    assert np.allclose(np.asarray(colour.Get()), [SKIN_COLOR])
+    assert mesh.GetPrim().HasAPI(UsdShade.MaterialBindingAPI)
+    material, _ = UsdShade.MaterialBindingAPI(mesh.GetPrim()).ComputeBoundMaterial()
+    assert material and material.GetPath() == Sdf.Path("/Face/Looks/Skin")
+    shader = material.ComputeSurfaceSource()[0]
+    assert shader.GetIdAttr().Get() == "UsdPreviewSurface"
+    assert np.allclose(shader.GetInput("diffuseColor").Get(), SKIN_COLOR)
+    assert shader.GetInput("metallic").Get() == 0.0 and shader.GetInput("roughness").Get() == pytest.approx(0.6)
+    report = validate(out)
+    assert report.ok and "no findings" in report.check("usd validators").detail, report.to_text()
+
+
 def test_usd_round_trip(tmp_path, grid_mesh):
     anim = make_animation(grid_mesh, frames=30, fps=30.0)
     write_animation(anim, tmp_path / "a.usdc", meters_per_unit=0.01)

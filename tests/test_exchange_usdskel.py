@@ -27,14 +27,6 @@ FRAMES = 60
 WEIGHTS = Sdf.Path("/Face/Skeleton/Animation.blendShapeWeights")
 
 
-
-
-
-
-
-
-
-
 def test_blendshapes_layout(tmp_path, grid_mesh):
     anim = rich_animation(grid_mesh)
     out = tmp_path / "clip.usda"
@@ -115,6 +107,39 @@ def test_blendshapes_layout(tmp_path, grid_mesh):
     assert info["size"] == pytest.approx(grid_mesh.size)
     assert 0 < info["max_error"] <= DEFAULT_TOLERANCE * grid_mesh.size
     assert info["relative_error"] == pytest.approx(info["max_error"] / grid_mesh.size)
+
+
+def test_extents_bound_every_frame(tmp_path, grid_mesh):
+    """The mesh's and the SkelRoot's extent: a sample per frame bounding UsdSkel's evaluation of that frame
+    (tightly), and a default value bounding every frame (the jaw leaves the template's box)."""
+    anim = rich_animation(grid_mesh)
+    out = tmp_path / "box.usdc"
+    write_animation(anim, out, mode="blendshapes", write_audio=False)
+    stage = Usd.Stage.Open(str(out))
+    mesh, root = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")), UsdSkel.Root(stage.GetPrimAtPath("/Face"))
+    template_box = np.stack([anim.template.min(0), anim.template.max(0)])
+    default = np.asarray(mesh.GetExtentAttr().Get(Usd.TimeCode.Default()), np.float64)
+    assert np.array_equal(default, np.asarray(root.GetExtentAttr().Get(Usd.TimeCode.Default())))
+    outside = 0
+    for t in range(FRAMES):
+        points = usdskel_points(stage, float(t)).astype(np.float64)
+        for boundable in (mesh, root):
+            box = np.asarray(boundable.GetExtentAttr().Get(float(t)), np.float64)
+            assert box.shape == (2, 3) and (box[0] <= box[1]).all()
+            slack = 1e-6 * anim.size
+            assert (points >= box[0] - slack).all() and (points <= box[1] + slack).all(), t
+            assert np.allclose(box, [points.min(0), points.max(0)], atol=1e-5 * anim.size)  # tight
+        assert (points >= default[0] - 1e-6).all() and (points <= default[1] + 1e-6).all()
+        outside += int(((points < template_box[0]) | (points > template_box[1])).any())
+    assert outside > 0  # the frames do leave the template's box: its extent alone would not bound them
+    assert list(mesh.GetExtentAttr().GetTimeSamples()) == list(root.GetExtentAttr().GetTimeSamples())
+    assert validate(out, require_audio=False).check("time samples").ok
+    # an extent of the template only (what the writer stated before) fails validate's time samples check
+    mesh.GetExtentAttr().Clear()  # its default and every time sample
+    mesh.GetExtentAttr().Set(Vt.Vec3fArray.FromNumpy(template_box.astype(np.float32)))
+    stage.GetRootLayer().Save()
+    check = validate(out, require_audio=False).check("time samples")
+    assert not check.ok and "does not bound the blended points" in check.detail
 
 
 @pytest.mark.parametrize("ext", [".usda", ".usdc"])
@@ -221,11 +246,12 @@ def test_validate_blendshapes(tmp_path, grid_mesh):
     write_animation(rich_animation(grid_mesh), out, mode="blendshapes")
     report = validate(out, template=grid_mesh, fps=FPS)
     assert report.ok and report.warnings == [], report.to_text()
-    for name in ("blendshapes", "reconstruction", "vertex count", "faces", "frame rate", "time samples",
+    for name in ("blendshapes", "reconstruction", "rig", "vertex count", "faces", "frame rate", "time samples",
                  "finite", "displacement", "audio", "audio duration", "usd validators"):
         assert report.check(name) is not None and report.check(name).ok, name
     assert report.check("time samples").detail == f"{FRAMES} frames, one at each of 0..{FRAMES - 1}"
     assert "blend shapes + 'rest'" in report.check("blendshapes").detail
+    assert "none named as ARKit shapes (pca_000, " in report.check("rig").detail
     assert "120 vertices per frame" in report.check("vertex count").detail
 
     def broken(name: str, edit) -> set[str]:
@@ -267,7 +293,7 @@ def test_validate_blendshapes(tmp_path, grid_mesh):
         stage.GetRootLayer().customLayerData = data
 
     assert broken("nan", nan_offset) == {"finite"}
-    assert broken("huge", huge_offset) == {"displacement"}
+    assert broken("huge", huge_offset) == {"displacement", "time samples"}  # and it leaves the extent
     assert broken("gap", drop_sample) == {"time samples"}  # 59 frames: still within a frame of the audio
     cascade = {"blendshapes", "vertex count", "finite", "audio duration"}  # no frames to check at all
     assert broken("short", short_sample) == cascade
@@ -299,3 +325,34 @@ def test_biwi_blendshapes(tmp_path, biwi_template):
     assert report.check("vertex count").detail.startswith("23370 vertices per frame")
     back = read_animation(tmp_path / "biwi_bs.usdc", template=biwi_template)
     assert max_distance(back.vertices, anim.vertices) <= info["max_error"] + 1e-6 * biwi_template.size
+
+
+@pytest.mark.parametrize("name", ["arkit.usdc", "arkit.usdz"])
+def test_arkit_rig_blend_shapes(tmp_path, name):
+    """`rig="arkit"`: blendshapes by default, one BlendShape per ARKit shape named by ARKit's name, the
+    solver's weights; UsdSkel's own evaluation is the template plus the weighted ARKit shapes."""
+    from helpers import rig_clip
+
+    from facegen.arkit.names import ARKIT_NAMES
+    from facegen.arkit.solve import fit_arkit
+
+    anim = rig_clip(30)
+    out = tmp_path / name
+    write_animation(anim, out, rig="arkit")
+    stage = Usd.Stage.Open(str(out))
+    mesh = stage.GetPrimAtPath("/Face/Mesh")
+    assert list(UsdSkel.BindingAPI(mesh).GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
+    assert [p.name for p in UsdSkel.BindingAPI(mesh).GetBlendShapeTargetsRel().GetTargets()] == list(ARKIT_NAMES)
+    animation = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation"))
+    assert list(animation.GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
+    fit = fit_arkit(anim)
+    t = 12
+    assert np.allclose(np.asarray(animation.GetBlendShapeWeightsAttr().Get(t)), fit.weights[t])
+    expected = anim.template + np.einsum("k,kvc->vc", fit.weights[t], fit.shapes.offsets)
+    assert max_distance(usdskel_points(stage, float(t)), expected) <= 1e-5 * anim.size
+    info = stage.GetRootLayer().customLayerData["facegen"]["reconstruction"]
+    assert info["rig"] == "arkit" and info["targets"] == 52 and "tolerance" not in info
+    assert info["lip_error_mm"] == pytest.approx(fit.lip_error_mm)
+    report = validate(out)
+    assert report.ok and report.warnings == [], report.to_text()
+    assert report.check("rig").detail.startswith("ARKit: 52 of 52 shapes (eyeBlinkLeft, ")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import subprocess
+import sys
 
 import imageio_ffmpeg
 import numpy as np
@@ -270,10 +271,25 @@ def test_render_files_usd_glb_and_npy_with_template(grid_mesh, tmp_path):
     assert result.width == 4 * SIZE and "identical" in " ".join(result.notes)
 
 
+def test_npy_of_the_default_model_renders_without_model(tmp_path):
+    """`facegen render x.npy` with no --model/--template: the built-in model's face when the vertex counts
+    match (what `facegen animate -o x.npy` writes); through the CLI as users run it."""
+    from facegen.bundle import load_bundle
+
+    face = load_bundle(None).template
+    anim = talking_clip(Mesh(face.vertices, face.faces, {"lips": face.regions["lips"]}), frames=4)
+    write_animation(anim, tmp_path / "line.npy", write_audio=False)
+    done = subprocess.run([sys.executable, "-m", "facegen", "render", str(tmp_path / "line.npy"), "-o",
+                           str(tmp_path / "line.mp4"), "--size", "64", "--views", "front", "-q"],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert decode_frames(tmp_path / "line.mp4").shape == (4, 64, 64, 3)
+
+
 @pytest.mark.parametrize(
     ("name", "kwargs", "message"),
     [
-        ("clip.npy", {}, "--model BUNDLE or --template MESH"),
+        ("clip.npy", {}, "120 per frame, and the built-in model's face has 23370: pass --model BUNDLE"),
         ("missing.usda", {}, "does not exist"),
         ("clip.txt", {}, "unknown extension"),
         ("broken.usda", {}, "broken.usda"),

@@ -19,7 +19,6 @@ LOOK_SIDE, LOOK_UP, LOOK_DOWN = 0.52, 0.42, 0.45  # eye rotation (rad) at eyeLoo
 EYE_ROTATED_DEG, EYE_FIXED_DEG = 45.0, 85.0  # the eyeball cap turns fully inside, not at all at its rim
 SMILE_GAIN = 1.35  # mouthSmile = the rig's smile (the mouth-corner part of cheek_raise) times this
 PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind the eyeball centres
-TONGUE_JAW = 0.22  # jaw_open of tongueOut on a face without a tongue
 
 
 def _smoothstep(t: np.ndarray) -> np.ndarray:
@@ -137,7 +136,8 @@ def _jaw(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthClose"] = d.pose(jaw_open=1.0, lip_close=1.0) - d.pose(jaw_open=1.0)
     # no tongue on this face: the small jaw drop and the lips parting a tongue pushed out would cause
     w_lo = d.field(d.f["d_lo"], 2.0, ~d.f["upper_side"])
-    out["tongueOut"] = d.delta(jaw_open=TONGUE_JAW) + d.vec(dy=-0.15 * w_lo * d.f["lat"], dz=0.45 * w_lo)
+    # no tongue on this face: the lower lip pushed out and down as a tongue over it would (no jaw: that is jawOpen)
+    out["tongueOut"] = d.vec(dy=-0.2 * w_lo * d.f["lat"], dz=0.45 * w_lo * d.f["lat"])
 
 
 def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
@@ -149,7 +149,8 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthFunnel"] = d.delta(lip_funnel=1.0)
     out["mouthPucker"] = d.delta(lip_round=1.0)
     out["mouthRollLower"] = d.delta(lower_lip_tuck=1.0)
-    out["mouthRollUpper"] = d.vec(dy=-0.32 * w_up * lat - 0.05 * w_lo * lat, dz=-0.45 * w_up * lat)
+    # the upper lip's margin curls in over the teeth (down and back), the skin above it hardly moves
+    out["mouthRollUpper"] = d.vec(dy=-0.25 * near * upper * lat - 0.05 * w_lo * lat, dz=-0.4 * near * upper * lat)
     wide = d.field(f["d_m"], 3.2)
     out["mouthLeft"] = d.vec(dx=0.8 * wide, dz=-0.1 * wide * np.tanh(X / 1.5))
     out["mouthRight"] = d.vec(dx=-0.8 * wide, dz=0.1 * wide * np.tanh(X / 1.5))
@@ -162,7 +163,9 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     lat_wide = np.sqrt(np.clip(1 - (X / (d.rig.mouth_half + 1.0)) ** 2, 0, 1))
     shrug = d.field(f["d_lo"], 2.6, ~upper) * lat_wide
     out["mouthShrugLower"] = d.vec(dy=0.28 * shrug, dz=0.2 * shrug)
-    out["mouthShrugUpper"] = d.vec(dy=0.14 * w_up * lat, dz=0.2 * w_up * lat)
+    # the whole upper lip pushed out and up (not the reverse of mouthRollUpper: that one is the margin alone)
+    shrug_up = d.field(f["d_up"], 2.6, upper) * lat_wide
+    out["mouthShrugUpper"] = d.vec(dy=0.1 * shrug_up, dz=0.28 * shrug_up)
     press = d.delta(lip_close=1.0) + d.vec(dy=-0.08 * sgn * near * lat, dz=-0.1 * near)
     d.sided(out, "mouthPress", press)
     lower = d.field(f["d_lo"], 2.0, ~upper)

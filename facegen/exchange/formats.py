@@ -26,6 +26,7 @@ class Format:
     validator: str
     streams: bool = False  # its writer reads frames block by block
     whole_clip: tuple[str, str] | None = None  # (option, value) with which the writer needs every frame at once
+    arkit: bool = False  # its files hold ARKit shape weights (fitted on the rig's face: facegen.arkit)
 
     def streams_with(self, options: dict) -> bool:
         """True when writing with `options` reads the frames block by block."""
@@ -37,16 +38,18 @@ class Format:
 
 FORMATS = (
     Format("USD", "facegen.exchange.usd", (".usda", ".usdc", ".usd"),
-           ("mode", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.usd",
+           ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.usd",
            streams=True, whole_clip=("mode", "blendshapes")),  # blendshapes: a PCA over the whole clip
     Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True),
-    Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"), ("morph_targets", "tolerance", "meters_per_unit"),
-           "facegen.validate.gltf"),
-    Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "morph_targets", "tolerance", "meters_per_unit"),
+    Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"),
+           ("rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.gltf"),
+    Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"),
            "facegen.validate.usd"),
     # ARKit's 52 shape weights per frame (fitted on facegen's face): Audio2Face JSON, Live Link Face CSV
-    Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit", streams=True),
-    Format("Live Link Face CSV", "facegen.exchange.arkit_csv", (".csv",), (), "facegen.validate.arkit", streams=True),
+    Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit", streams=True,
+           arkit=True),
+    Format("Live Link Face CSV", "facegen.exchange.arkit_csv", (".csv",), (), "facegen.validate.arkit", streams=True,
+           arkit=True),
 )
 
 

@@ -5,13 +5,18 @@ Layout of a written file:
     scene 0        node "Face" (scale = meters_per_unit, default 0.2 like the USD writer: glTF is in
                    meters, the vertex data stays in the animation's units); a global KHR_audio_emitter
                    emitter playing the clip's sound when there is audio
-    mesh "Face"    one triangle primitive: POSITION (the rest pose: template + `rest` offset), NORMAL,
-                   indices (uint16 when V < 65536); morph `targets` of POSITION offsets, K of them, from a
-                   PCA of the clip's offsets (exchange/pca.py): K is the fewest that keep the largest
-                   vertex error under `tolerance` x the face size (default 1e-3), or `morph_targets` fixes
-                   K, or "all" = one target per frame (clips up to 300 frames). Every weight lies in [0, 1]
-                   (Blender clamps shape keys to that range). mesh.weights = frame 0's weights;
+    mesh "Face"    one triangle primitive: POSITION (the template: the neutral face, a real pose, which
+                   static readers show), NORMAL, TEXCOORD_0 (exchange/surface.py's UVs, v down), indices
+                   (uint16 when V < 65536), material 0; morph `targets` of POSITION and NORMAL offsets
+                   (exchange/basis.py, by `rig`): "pca" (default) a PCA of the clip's offsets, K the fewest
+                   that keep the largest vertex error under `tolerance` x the face size (default 1e-3), or
+                   `morph_targets` fixes K, or "all" = one target per frame (clips up to 300 frames), plus
+                   a target "rest" whose weight is 1 in every frame; "arkit" the 52 ARKit blend shapes named
+                   by their ARKit names, weights from the solver. Every weight lies in [0, 1] (Blender
+                   clamps shape keys to that range). NORMAL offsets make the blended normals follow the
+                   moving surface (least squares over the frames). mesh.weights = frame 0's weights;
                    mesh.extras.targetNames names the targets (three.js and Blender read it).
+    material 0     "Skin": pbrMetallicRoughness, base colour surface.SKIN_COLOR, metallic 0, roughness 0.6
     animation      "speech": one channel, the node's `weights`, LINEAR sampler, input times frame / fps
                    (0 .. (T-1)/fps), output T x K weights
     audio          KHR_audio_emitter (draft; in extensionsUsed only, so readers without it still load the
@@ -19,9 +24,11 @@ Layout of a written file:
                    emitter on the scene. The MP3 is delay-compensated (exchange/mp3.py). The exact clip is
                    also written as a WAV beside the file (`out.wav`): Blender and most DCCs ignore the
                    extension and take the sidecar.
-    asset.extras   facegen: version, fps, frames, duration, morphTargets, tolerance, reconstructionError
-                   (largest vertex error / face size), reconstructionErrorUnits, faceSize, metersPerUnit,
-                   audio (sampleRate, samples, bitrate, delayCompensated, sidecar), metadata
+    asset.extras   facegen: version, fps, frames, duration, rig, morphTargets (targets in the file),
+                   tolerance, reconstructionError (largest vertex error / face size),
+                   reconstructionErrorUnits, faceSize, metersPerUnit, lipErrorMm and faceErrorMm (arkit:
+                   the fit's mean errors), audio (sampleRate, samples, bitrate, delayCompensated, sidecar),
+                   metadata
 
 POSITION accessors (base and targets) and the sampler input carry min/max. A `.gltf` keeps its binary data
 in `out.bin` beside it. All files are written through temporary files: a failure leaves none of them.
@@ -41,8 +48,10 @@ from facegen.atomic import atomic_path
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
+from facegen.exchange.basis import normal_deltas, stored, writer_basis
 from facegen.exchange.formats import by_module
-from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, morph_basis
+from facegen.exchange.pca import MorphBasis
+from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
 from facegen.mesh import Mesh, check_topology, vertex_normals
 
@@ -59,6 +68,7 @@ def write(
     anim: Animation,
     path: str | os.PathLike,
     *,
+    rig: str = "pca",
     morph_targets: int | str | None = None,
     tolerance: float | None = None,
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
@@ -67,8 +77,9 @@ def write(
 ) -> list[Path]:
     """Write `anim` as .glb or .gltf (+ .bin) with its audio embedded and as a WAV sidecar.
 
-    `morph_targets`: None (fewest targets within `tolerance` x face size; default tolerance 1e-3), a
-    number, or "all". `audio_source`: the input audio file, kept (not overwritten) when it is the sidecar.
+    `rig`: "pca" or "arkit" (the 52 ARKit shapes; needs the face's rig regions). `morph_targets` (PCA):
+    None (fewest targets within `tolerance` x face size; default tolerance 1e-3), a number, or "all".
+    `audio_source`: the input audio file, kept (not overwritten) when it is the sidecar.
     Returns the files written: the glTF file, then the .bin (for .gltf), then the WAV (with audio).
     """
     check_animation(anim)
@@ -78,8 +89,7 @@ def write(
         raise FacegenError(f"{path} is not a glTF file name: use one of {', '.join(FORMAT.extensions)}")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
-    tolerance = DEFAULT_TOLERANCE if tolerance is None else float(tolerance)
-    basis = morph_basis(anim, morph_targets, tolerance, unit_weights=True, sparse=True)
+    basis = writer_basis(anim, rig, morph_targets, tolerance)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     sound = mp3.encode(audio, anim.sample_rate) if audio is not None else None
     bin_path = path.with_suffix(".bin")
@@ -126,40 +136,47 @@ def build(
         accessors.append(g.Accessor(bufferView=view, componentType=component, count=int(count), type=kind, **bounds))
         return len(accessors) - 1
 
-    template = np.asarray(anim.template, dtype=np.float32)
-    base = (template + basis.rest).astype(np.float32)
+    base = np.asarray(anim.template, dtype=np.float32)
     faces = np.asarray(anim.faces)
+    names, offsets, weights = stored(basis)
     index_type = np.uint16 if len(base) < 65536 else np.uint32
+    index_component = UNSIGNED_SHORT if index_type is np.uint16 else UNSIGNED_INT
     position = accessor(base, "VEC3", ARRAY_BUFFER, with_bounds=True)
     normal = accessor(vertex_normals(base, faces), "VEC3", ARRAY_BUFFER)
+    uv = face_uvs(base) * np.float32([1, -1]) + np.float32([0, 1])  # glTF's v runs down
+    texcoord = accessor(uv, "VEC2", ARRAY_BUFFER)
     indices = accessor(faces.astype(index_type).reshape(-1), "SCALAR", ELEMENT_ARRAY_BUFFER, with_bounds=True)
-    def target_accessor(offsets: np.ndarray) -> int:
-        """A morph target's POSITION offsets: sparse (on zeros) when that is smaller than dense."""
-        moving = np.flatnonzero(np.any(offsets != 0, axis=1))
-        if len(moving) * (np.dtype(index_type).itemsize + 12) >= len(offsets) * 12:
-            return accessor(offsets, "VEC3", ARRAY_BUFFER, with_bounds=True)
+
+    def target_accessor(values: np.ndarray) -> int:
+        """A morph target's offsets: sparse (on zeros) when that is smaller than dense; with min/max."""
+        moving = np.flatnonzero(np.any(values != 0, axis=1))
+        if len(moving) * (np.dtype(index_type).itemsize + 12) >= len(values) * 12:
+            return accessor(values, "VEC3", ARRAY_BUFFER, with_bounds=True)
         if len(moving) == 0:
             moving = np.zeros(1, np.int64)  # a sparse accessor needs at least one entry
         ids = blob.add(moving.astype(index_type).tobytes(), None)
-        values = blob.add(np.ascontiguousarray(offsets[moving], np.float32).tobytes(), None)
+        data = blob.add(np.ascontiguousarray(values[moving], np.float32).tobytes(), None)
         sparse = g.Sparse(count=len(moving),
                           indices=g.AccessorSparseIndices(bufferView=ids, componentType=index_component),
-                          values=g.AccessorSparseValues(bufferView=values))
-        accessors.append(g.Accessor(componentType=FLOAT, count=len(offsets), type="VEC3", sparse=sparse, byteOffset=None,
-                                    min=offsets.min(0).astype(float).tolist(),
-                                    max=offsets.max(0).astype(float).tolist()))
+                          values=g.AccessorSparseValues(bufferView=data))
+        accessors.append(g.Accessor(componentType=FLOAT, count=len(values), type="VEC3", sparse=sparse,
+                                    byteOffset=None, min=values.min(0).astype(float).tolist(),
+                                    max=values.max(0).astype(float).tolist()))
         return len(accessors) - 1
 
-    index_component = UNSIGNED_SHORT if index_type is np.uint16 else UNSIGNED_INT
-    targets = [{"POSITION": target_accessor(t)} for t in basis.targets]
+    normal_offsets = normal_deltas(base, faces, offsets, weights)
+    targets = [{"POSITION": target_accessor(p), "NORMAL": target_accessor(n)}
+               for p, n in zip(offsets, normal_offsets, strict=True)]
     times = np.arange(anim.num_frames, dtype=np.float64) / float(anim.fps)
     time_input = accessor(times.astype(np.float32), "SCALAR", None, with_bounds=True)
-    weight_output = accessor(basis.weights.astype(np.float32).reshape(-1), "SCALAR", None)
+    weight_output = accessor(weights.reshape(-1), "SCALAR", None)
 
-    primitive = g.Primitive(attributes=g.Attributes(POSITION=position, NORMAL=normal), indices=indices,
-                            mode=g.TRIANGLES, targets=targets)
-    mesh = g.Mesh(name="Face", primitives=[primitive], weights=basis.weights[0].astype(float).tolist(),
-                  extras={"targetNames": list(basis.names)})
+    primitive = g.Primitive(attributes=g.Attributes(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord),
+                            indices=indices, mode=g.TRIANGLES, targets=targets, material=0)
+    mesh = g.Mesh(name="Face", primitives=[primitive], weights=weights[0].astype(float).tolist(),
+                  extras={"targetNames": names})
+    skin = g.Material(name=MATERIAL_NAME, pbrMetallicRoughness=g.PbrMetallicRoughness(
+        baseColorFactor=[*SKIN_COLOR, 1.0], metallicFactor=SKIN_METALLIC, roughnessFactor=SKIN_ROUGHNESS))
     node = g.Node(name="Face", mesh=0, scale=[float(meters_per_unit)] * 3)
     animation = g.Animation(
         name="speech",
@@ -173,18 +190,22 @@ def build(
             "fps": float(anim.fps),
             "frames": int(anim.num_frames),
             "duration": float(anim.duration),
-            "morphTargets": basis.k,
+            "rig": basis.rig,
+            "morphTargets": len(names),
             "tolerance": basis.tolerance,
             "reconstructionError": float(basis.relative_error),
             "reconstructionErrorUnits": float(basis.max_error),
             "faceSize": float(basis.size),
             "metersPerUnit": float(meters_per_unit),
+            **({} if basis.lip_error_mm is None else {"lipErrorMm": basis.lip_error_mm}),
+            **({} if basis.face_error_mm is None else {"faceErrorMm": basis.face_error_mm}),
             "metadata": _jsonable(anim.metadata),
         }
     }
     gltf = g.GLTF2(
         asset=g.Asset(version="2.0", generator=f"facegen {__version__}", extras=extras),
-        scene=0, scenes=[scene], nodes=[node], meshes=[mesh], animations=[animation], accessors=accessors,
+        scene=0, scenes=[scene], nodes=[node], meshes=[mesh], materials=[skin], animations=[animation],
+        accessors=accessors,
     )
     if sound is not None:
         data, info = sound
@@ -361,7 +382,8 @@ def weight_track(doc, node: int) -> tuple[int, int, str] | None:
 
 def decode(path: str | os.PathLike) -> dict:
     """Everything `read` and `facegen validate` need, decoded: base [V,3], targets [K,V,3], times [T],
-    weights [T,K], faces [F,3], fps (asset extras, else from the times), info, the file object."""
+    weights [T,K], faces [F,3], fps (asset extras, else from the times), info, the targets' names
+    (mesh.extras.targetNames, else none), the file object."""
     file = GltfFile(path)
     doc = file.doc
     node, mesh_index = find_animated_mesh(doc)
@@ -397,10 +419,11 @@ def decode(path: str | os.PathLike) -> dict:
         steps = np.diff(times)
         fps = float(1.0 / np.median(steps)) if len(steps) and np.median(steps) > 0 else None
     scale = doc.nodes[node].scale
+    names = (mesh.extras or {}).get("targetNames") if isinstance(mesh.extras, dict) else None
     return {
         "file": file, "node": node, "mesh": mesh_index, "base": base, "targets": targets, "times": times,
         "weights": weights, "faces": faces, "fps": fps, "info": info, "interpolation": interpolation,
-        "scale": scale,
+        "scale": scale, "names": [str(n) for n in names] if isinstance(names, list) else [],
     }
 
 

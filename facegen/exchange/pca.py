@@ -30,13 +30,16 @@ MAX_FRAME_TARGETS = 300  # `k="all"` (one target per frame) is refused for longe
 _OVERSAMPLE = 16  # extra random directions in the range finder beyond the targets kept
 _FIRST_RANK = 48  # range finder size tried first when K is chosen from the tolerance
 _SEARCH_FRAMES = (100, 400)  # K is searched on this many evenly spaced frames, then confirmed on all
-_TILE = (64, 3 * 2048)
-SPARSE_SEARCH_SHARE = 0.9  # with sparse=True, K is chosen for this share of the tolerance  # rows x columns (x, y, z of 2048 vertices) per block when measuring errors
+_TILE = (64, 3 * 2048)  # rows x columns (x, y, z of 2048 vertices) per block when measuring errors
+SPARSE_SEARCH_SHARE = 0.9  # with sparse=True, K is chosen for this share of the tolerance
 
 
 @dataclass
 class MorphBasis:
-    """Morph targets reproducing an animation: frame t = template + rest + weights[t] @ targets."""
+    """Morph targets reproducing an animation: frame t = template + rest + weights[t] @ targets.
+
+    The PCA basis of this module, or any other rig's named shapes (exchange/basis.py: `rig`, and the
+    fit's stated lip and whole-face errors in millimetres when the rig has them)."""
 
     targets: np.ndarray  # [K, V, 3] float32 offsets
     weights: np.ndarray  # [T, K] float32
@@ -45,6 +48,9 @@ class MorphBasis:
     size: float  # the face's size (template bounding-box diagonal) the tolerance refers to
     tolerance: float | None  # the relative tolerance K was chosen for (None when K was fixed)
     names: list[str]  # one name per target
+    rig: str = "pca"
+    lip_error_mm: float | None = None
+    face_error_mm: float | None = None
 
     @property
     def k(self) -> int:

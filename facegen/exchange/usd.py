@@ -7,15 +7,20 @@ Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate)
     /Face/Mesh     Mesh: faceVertexCounts (all 3), faceVertexIndices, subdivisionScheme "none",
                    orientation rightHanded (BIWI triangles wind counter-clockwise seen from the front, so
                    normals face +Z, out of the face); `points` and `extent` have one time sample per
-                   frame at time codes 0..T-1, and their default (non-animated) values hold the rest pose
+                   frame at time codes 0..T-1, and their default (non-animated) values hold the rest pose;
+                   primvars:st (vertex texCoord2f, exchange/surface.py's UVs), primvars:displayColor
+                   (constant skin colour), MaterialBindingAPI -> /Face/Looks/Skin
+    /Face/Looks/Skin  Material; its Shader "Surface" a UsdPreviewSurface (diffuseColor the skin colour,
+                   metallic 0, roughness 0.6) connected to outputs:surface
     /Face/Audio    SpatialAudio: filePath @./out.wav@ (relative to the layer), auralMode nonSpatial,
                    playbackMode onceFromStart (play once from startTime to the audio's end); startTime
                    is its schema fallback 0 (authoring a timecode forces usdc crate 0.9 and a warning)
 
 With `mode="blendshapes"` the frames are UsdSkel blend shapes instead of `points` samples: /Face is a
 SkelRoot, and a Skeleton, a SkelAnimation with one blendShapeWeights sample per frame and one BlendShape
-per PCA target are added (layout in usd_skel.py); customLayerData["facegen"]["reconstruction"] states the
-error of the reconstruction.
+per target of the rig's basis (exchange/basis.py: PCA, or with `rig="arkit"` the 52 ARKit shapes) are
+added (layout in usd_skel.py); customLayerData["facegen"]["reconstruction"] states the error of the
+reconstruction.
 
 Stage metadata: timeCodesPerSecond = framesPerSecond = fps, startTimeCode 0, endTimeCode T-1, upAxis Y,
 metersPerUnit (`meters_per_unit`, default 0.2: BIWI coordinates are scaled to unit surface area, and a
@@ -38,7 +43,9 @@ from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_skel
+from facegen.exchange.basis import stored, writer_basis
 from facegen.exchange.formats import by_module
+from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.wav import atomic_with_sidecar
 from facegen.mesh import Mesh, check_topology
 
@@ -48,13 +55,15 @@ DEFAULT_METERS_PER_UNIT = 0.2
 ROOT_PATH = "/Face"
 MESH_PATH = "/Face/Mesh"
 AUDIO_PATH = "/Face/Audio"
+MATERIAL_PATH = f"/Face/Looks/{MATERIAL_NAME}"
 
 
 def write(
     anim: Animation,
     path: str | os.PathLike,
     *,
-    mode: str = "points",
+    mode: str | None = None,
+    rig: str = "pca",
     morph_targets: int | str | None = None,
     tolerance: float | None = None,
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
@@ -63,9 +72,11 @@ def write(
 ) -> list[Path]:
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
-    `mode` is "points" (one `points` sample per frame) or "blendshapes" (UsdSkel blend shapes from the PCA
-    basis: `morph_targets` fixes their number K, an int, or "all" for one per frame; by default K is the
-    fewest keeping every vertex within `tolerance` x the face's size, default pca.DEFAULT_TOLERANCE).
+    `mode` is "points" (one `points` sample per frame) or "blendshapes" (UsdSkel blend shapes); None is
+    "blendshapes" with `rig="arkit"`, else "points". `rig` chooses the blend shapes (exchange/basis.py):
+    "pca", whose `morph_targets` fixes their number K, an int, or "all" for one per frame (by default K is
+    the fewest keeping every vertex within `tolerance` x the face's size, default pca.DEFAULT_TOLERANCE),
+    or "arkit", the 52 ARKit shapes named by ARKit's names (the face needs the rig's regions).
     Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio`
     is true. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
     to `clip.usda`) it is referenced, not overwritten.
@@ -78,7 +89,7 @@ def write(
         raise FacegenError(f"{path} is not a USD file name: use one of {', '.join(FORMAT.extensions)}")
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
-    basis = _check_mode(anim, mode, morph_targets, tolerance)
+    basis = _check_mode(anim, mode, rig, morph_targets, tolerance)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
         layer = Sdf.Layer.CreateNew(str(tmp))
@@ -91,22 +102,29 @@ def write(
             del stage
             _author_samples(layer, anim)
         else:
-            names, offsets, weights = usd_skel.shapes(basis)
+            names, offsets, weights = stored(basis)
             info = {"reconstruction": usd_skel.layer_info(basis, len(names))}
-            _author_stage(stage, anim, meters_per_unit, audio_asset, "blendshapes", info)
+            extents = usd_skel.frame_extents(anim.template, offsets, weights)
+            bounds = np.stack([extents[:, 0].min(0), extents[:, 1].max(0)])
+            _author_stage(stage, anim, meters_per_unit, audio_asset, "blendshapes", info, bounds)
             usd_skel.author_skeleton(stage, MESH_PATH, names, offsets)
             del stage
-            usd_skel.author_weights(layer, weights)
+            usd_skel.author_samples(layer, weights, extents, MESH_PATH, ROOT_PATH)
         if not layer.Save():
             raise FacegenError(f"cannot write {path}: check free disk space and permissions")
         del layer
     return [path] if wav is None else [path, wav]
 
 
-def _check_mode(anim: Animation, mode: str, morph_targets: int | str | None, tolerance: float | None):
-    """Refuse an unknown mode or blendshape options in points mode; the PCA basis for blendshapes."""
+def _check_mode(anim: Animation, mode: str | None, rig: str, morph_targets: int | str | None,
+                tolerance: float | None):
+    """Refuse an unknown mode or blendshape options in points mode; the rig's basis for blendshapes."""
+    if mode is None:
+        mode = "blendshapes" if rig == "arkit" else "points"
     if mode not in MODES:
         raise FacegenError(f"unknown USD mode {mode!r}: use one of {', '.join(MODES)}")
+    if mode == "points" and rig == "arkit":
+        raise FacegenError("--rig arkit writes UsdSkel blend shapes: drop --usd-mode points")
     if mode == "points":
         given = [n for n, v in (("morph targets", morph_targets), ("tolerance", tolerance)) if v is not None]
         if given:
@@ -115,15 +133,16 @@ def _check_mode(anim: Animation, mode: str, morph_targets: int | str | None, tol
                 "add --usd-mode blendshapes or drop them"
             )
         return None
-    return usd_skel.basis_for(anim, morph_targets, tolerance)
+    return writer_basis(anim, rig, morph_targets, tolerance)
 
 
 def _author_stage(
     stage, anim: Animation, meters_per_unit: float, audio_asset: str | None, mode: str = "points",
-    info: dict | None = None,
+    info: dict | None = None, bounds: np.ndarray | None = None,
 ) -> None:
-    """Everything except the per-frame samples: stage metadata, prims, topology, rest pose, audio;
-    `info` is added to customLayerData["facegen"]."""
+    """Everything except the per-frame samples: stage metadata, prims, topology, rest pose, look, audio;
+    `info` is added to customLayerData["facegen"]; `bounds` (blendshapes: every frame's) is the default
+    extent of the mesh and the SkelRoot (else the rest pose's, on the mesh)."""
     from pxr import Kind, Sdf, Usd, UsdGeom, UsdMedia, UsdSkel, Vt
 
     frames = anim.num_frames
@@ -146,7 +165,12 @@ def _author_stage(
     mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
     rest = np.ascontiguousarray(anim.template, dtype=np.float32)
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest))
-    mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([rest.min(0), rest.max(0)])))
+    box = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(
+        np.stack([rest.min(0), rest.max(0)]) if bounds is None else bounds, dtype=np.float32))
+    mesh.CreateExtentAttr(box)
+    if mode == "blendshapes":
+        root.CreateExtentAttr(box)
+    _author_look(stage, mesh, rest)
 
     if audio_asset is not None:
         sound = UsdMedia.SpatialAudio.Define(stage, AUDIO_PATH)
@@ -167,6 +191,24 @@ def _author_stage(
             **(info or {}),
         }
     }
+
+
+def _author_look(stage, mesh, template: np.ndarray) -> None:
+    """UVs (primvars:st), displayColor and the skin UsdPreviewSurface material bound to the mesh."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
+
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    st.Set(Vt.Vec2fArray.FromNumpy(face_uvs(template)))
+    mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*SKIN_COLOR)]))
+    UsdGeom.Scope.Define(stage, MATERIAL_PATH.rsplit("/", 1)[0])
+    material = UsdShade.Material.Define(stage, MATERIAL_PATH)
+    shader = UsdShade.Shader.Define(stage, f"{MATERIAL_PATH}/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*SKIN_COLOR))
+    shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(SKIN_METALLIC)
+    shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(SKIN_ROUGHNESS)
+    material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
 
 
 def _author_samples(layer, anim: Animation) -> None:

@@ -1,13 +1,15 @@
 """UsdSkel blendshapes: the animation as a few BlendShape targets and one weight curve per target.
 
-`facegen.exchange.usd.write(..., mode="blendshapes")` calls this module. The targets are the PCA basis of
-`facegen.exchange.pca` (the same code path as glTF morph targets), with weights rescaled into [0, 1]
-(Blender clamps a shape key's value to its 0..1 slider range), so a frame is
+`facegen.exchange.usd.write(..., mode="blendshapes")` calls this module. The targets are the writers'
+basis (exchange/basis.py, the same code path as glTF morph targets): by rig, the PCA basis with weights
+rescaled into [0, 1] (Blender clamps a shape key's value to its 0..1 slider range), or the 52 ARKit shapes
+named by their ARKit names with the solver's weights, so a frame is
 
-    points(t) = template + rest + sum_k weights[t, k] * offsets[k]
+    points(t) = template + sum_k weights[t, k] * offsets[k]
 
 Layout (added to the points-mode layout of usd.py; /Face is a SkelRoot instead of an Xform, and the
-mesh's `points` hold the template only, with no time samples):
+mesh's `points` hold the template only, with no time samples; the mesh's and the SkelRoot's `extent`
+have one time sample per frame, the blended frame's bounds, and a default value that bounds every frame):
 
     /Face/Skeleton            Skeleton: one joint "root", bind and rest transforms identity;
                               UsdSkelBindingAPI with skel:animationSource -> /Face/Skeleton/Animation
@@ -28,65 +30,26 @@ The reconstruction error goes in customLayerData["facegen"]["reconstruction"] (s
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
-from facegen.animation import Animation
 from facegen.errors import FacegenError
-from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, max_vertex_error, morph_basis
+from facegen.exchange.basis import REST_SHAPE
+from facegen.exchange.pca import MorphBasis
 
 SKELETON_PATH = "/Face/Skeleton"
 ANIMATION_PATH = "/Face/Skeleton/Animation"
 JOINT = "root"
-REST_SHAPE = "rest"
-
-
-def basis_for(anim: Animation, morph_targets: int | str | None, tolerance: float | None) -> MorphBasis:
-    """The PCA basis the blendshapes are made of: pca.morph_basis with weights in [0, 1] and sparse targets
-    (the same basis as glTF morph targets).
-
-    Vertices that never move in `anim` also get exactly zero offsets in every target and in `rest` (PCA
-    leaves float rounding there, and a fixed K has no error budget to drop it), so BlendShapes can leave
-    them out; the error is measured again then. `morph_targets` as pca.parse_morph_targets takes it.
-    """
-    basis = morph_basis(
-        anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance),
-        unit_weights=True, sparse=True,
-    )
-    moving = np.zeros(anim.num_vertices, bool)
-    template = np.asarray(anim.template, np.float32)
-    for _, block in anim.frame_blocks(256):  # in blocks: a [T, V, 3] boolean is large for long clips
-        moving |= np.any(block != template, axis=(0, 2))
-    if moving.all():
-        return basis
-    basis = replace(basis, targets=basis.targets * moving[None, :, None], rest=basis.rest * moving[:, None])
-    basis.max_error = max_vertex_error(anim, basis)
-    return basis
-
-
-def shapes(basis: MorphBasis) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """(names, offsets [K', V, 3], weights [T, K']) as written: the basis's targets, plus the `rest`
-    target with weight 1 in every frame when the basis has a nonzero constant offset."""
-    names = list(basis.names)
-    offsets = np.asarray(basis.targets, dtype=np.float32)
-    weights = np.asarray(basis.weights, dtype=np.float32)
-    if np.any(basis.rest):
-        if REST_SHAPE in names:
-            raise FacegenError(f"a morph target is already called {REST_SHAPE!r}: rename it")
-        names.append(REST_SHAPE)
-        offsets = np.concatenate([offsets, np.asarray(basis.rest, np.float32)[None]])
-        weights = np.concatenate([weights, np.ones((len(weights), 1), np.float32)], axis=1)
-    return names, offsets, weights
 
 
 def layer_info(basis: MorphBasis, count: int) -> dict:
     """customLayerData["facegen"]["reconstruction"]: how far the blendshapes are from the source frames.
 
-    max_error is in model units (the largest vertex distance over every frame), relative_error is it
-    divided by size (the template's bounding-box diagonal), tolerance the relative bound K was chosen for
-    (absent when K was fixed), targets the number of BlendShape prims (including `rest`)."""
+    rig is "pca" or "arkit"; max_error is in model units (the largest vertex distance over every frame),
+    relative_error is it divided by size (the template's bounding-box diagonal), tolerance the relative
+    bound K was chosen for (absent when K was fixed or the rig's shapes are), targets the number of
+    BlendShape prims (including `rest`); lip_error_mm and face_error_mm the ARKit fit's mean errors."""
     info = {
+        "rig": basis.rig,
         "targets": int(count),
         "max_error": float(basis.max_error),
         "relative_error": float(basis.relative_error),
@@ -94,7 +57,23 @@ def layer_info(basis: MorphBasis, count: int) -> dict:
     }
     if basis.tolerance is not None:
         info["tolerance"] = float(basis.tolerance)
+    if basis.lip_error_mm is not None:
+        info["lip_error_mm"] = float(basis.lip_error_mm)
+    if basis.face_error_mm is not None:
+        info["face_error_mm"] = float(basis.face_error_mm)
     return info
+
+
+def frame_extents(template: np.ndarray, offsets: np.ndarray, weights: np.ndarray, block: int = 64) -> np.ndarray:
+    """[T, 2, 3] float32: the bounding box (min, max) of each blended frame template + weights[t] @ offsets."""
+    template = np.asarray(template, np.float32)
+    flat = np.asarray(offsets, np.float32).reshape(len(offsets), -1)
+    out = np.empty((len(weights), 2, 3), np.float32)
+    for start in range(0, len(weights), block):
+        frames = (weights[start:start + block] @ flat).reshape(-1, *template.shape) + template
+        out[start:start + block, 0] = frames.min(1)
+        out[start:start + block, 1] = frames.max(1)
+    return out
 
 
 def author_skeleton(stage, mesh_path: str, names: list[str], offsets: np.ndarray) -> None:
@@ -129,15 +108,20 @@ def author_skeleton(stage, mesh_path: str, names: list[str], offsets: np.ndarray
     binding.CreateBlendShapeTargetsRel().SetTargets(targets)
 
 
-def author_weights(layer, weights: np.ndarray) -> None:
-    """One blendShapeWeights sample per frame at 0..T-1, straight into the layer (no stage open on it)."""
+def author_samples(layer, weights: np.ndarray, extents: np.ndarray, mesh_path: str, root_path: str) -> None:
+    """One blendShapeWeights sample per frame at 0..T-1 and, at the same times, the extent of the blended
+    mesh on the mesh and on the SkelRoot; straight into the layer (no stage open on it)."""
     from pxr import Sdf, Vt
 
     weights = np.ascontiguousarray(weights, dtype=np.float32)
     attr = Sdf.Path(ANIMATION_PATH).AppendProperty("blendShapeWeights")
+    boxes = [Sdf.Path(path).AppendProperty("extent") for path in (mesh_path, root_path)]
     with Sdf.ChangeBlock():
         for i in range(len(weights)):
             layer.SetTimeSample(attr, float(i), Vt.FloatArray.FromNumpy(weights[i]))
+            box = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(extents[i]))
+            for path in boxes:
+                layer.SetTimeSample(path, float(i), box)
 
 
 # ---- reading -----------------------------------------------------------------------------------------

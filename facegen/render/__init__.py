@@ -205,11 +205,24 @@ def _read_input(
     if not path.is_file():
         raise FacegenError(f"{what} {path} does not exist: pass an animation file facegen wrote")
     if path.suffix.lower() == ".npy" and template is None:
-        raise FacegenError(
-            f"{path.name} stores only vertex positions: pass --model BUNDLE or --template MESH "
-            "to give its faces"
-        )
+        template = _default_template(path)
     return read_animation(path, template=template, fps=fps)
+
+
+def _default_template(path: Path) -> Mesh:
+    """The built-in model's template for a .npy of its vertex count (what `facegen animate` writes with the
+    default model); any other count is a FacegenError asking for the mesh."""
+    from facegen.bundle import load_bundle
+    from facegen.exchange.npy import load_frames
+
+    count = load_frames(path).shape[1] // 3
+    template = load_bundle(None).template
+    if count != template.num_vertices:
+        raise FacegenError(
+            f"{path.name} stores only vertex positions, {count} per frame, and the built-in model's face has "
+            f"{template.num_vertices}: pass --model BUNDLE or --template MESH to give its faces"
+        )
+    return template
 
 
 def render(
@@ -225,7 +238,8 @@ def render(
     progress: bool = True,
     threads: int | None = None,
 ) -> RenderResult:
-    """Render an animation (object or file: .usd*, .glb/.gltf, .npy with `template`) to a preview video.
+    """Render an animation (object or file: .usd*, .glb/.gltf, .npy with `template`, else the built-in
+    model's face when the vertex count is its own) to a preview video.
 
     compare: a second animation (object or file) of the same topology: see render_animation. A .npy
     comparison file uses the input's template when `template` is not given, and the input's fps.

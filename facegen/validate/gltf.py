@@ -1,6 +1,7 @@
 """Checks on glTF/GLB animations (exchange/gltf.py), added to a Report, and the Khronos validator's driver.
 
   file              the file parses as glTF with one animated morph-target mesh (exchange/gltf.py layout)
+  rig               the targets' names (mesh.extras.targetNames): ARKit shapes or not (validate/rig.py)
   gltf-validator    the Khronos glTF-Validator (npm `gltf-validator`, run by facegen/assets/gltf_validate.js
                     with Node): zero errors; each warning is a `gltf:<CODE>` warning, infos are counted.
                     Without Node or the package this one check fails and says how to install it
@@ -36,6 +37,7 @@ from facegen.exchange.wav import sidecar_path
 from facegen.mesh import Mesh
 from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
+from facegen.validate.rig import check_rig
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 SCRIPT = ASSETS / "gltf_validate.js"
@@ -89,6 +91,7 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     report.add("file", True, f"glTF {'binary' if path.suffix.lower() == '.glb' else 'JSON'}: one mesh, "
                f"{K} morph targets, {T} keys (written by {info.get('version') and 'facegen ' + info['version'] or '?'})")
     _khronos(report, path)
+    check_rig(report, decoded["names"], info.get("lipErrorMm"), info.get("faceErrorMm"))
 
     frames = gltf_format.reconstruct(decoded)
     base = decoded["base"]

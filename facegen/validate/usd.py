@@ -10,11 +10,13 @@ errors.
   frame rate      timeCodesPerSecond authored, equal to framesPerSecond and to `fps` when given
   time samples    points sampled exactly at 0, 1, ..., T-1, stage start/end 0 and T-1, an extent sample per
                   frame that contains the frame's points (blendshapes: blendShapeWeights sampled at
-                  0, 1, ..., T-1, one weight per blend shape in each sample)
+                  0, 1, ..., T-1, one weight per blend shape in each sample, and the mesh's extent at each
+                  frame, sampled or not, contains the blended points)
   blendshapes     blendshapes files (a mesh bound to UsdSkel blend shapes, no points samples): the frames
                   are blended from the BlendShape offsets and weights, every other check runs on them; the
                   skel binding is complete and UsdSkel's own evaluation at the middle frame equals the blend
   reconstruction  blendshapes: the error facegen stated in customLayerData is within its tolerance
+  rig             blendshapes: the shapes' names, ARKit's or not (validate/rig.py)
   package         USDZ: the package's files (the root layer first, its WAV), the audio resolves inside it
   finite, displacement   as in checks.py
   audio           the SpatialAudio prim's file resolves relative to the layer, or inside the .usdz, and
@@ -40,6 +42,7 @@ from facegen.exchange import usd_skel
 from facegen.exchange import usdz as usdz_format
 from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
+from facegen.validate.rig import check_rig
 
 SKEL_AGREEMENT = 1e-5  # UsdSkel's evaluation vs facegen's blend (float32 sums), as a share of the face size
 
@@ -110,7 +113,7 @@ def check(report: Report, path: Path, expected: Expected) -> None:
         )
     rate = file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS
 
-    _check_time_samples(report, stage, mesh, times, "blendShapeWeights" if blended else "points")
+    _check_time_samples(report, stage, mesh, times, "blendShapeWeights" if blended else "points", frames)
     check_values(report, frames if counts == [count] else [], own, template, expected.max_displacement)
 
     audio = None
@@ -170,6 +173,8 @@ def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], 
             + ("" if tolerance is None else f"; tolerance {float(tolerance):g}")
             + ("" if ok else " (over the tolerance)"),
         )
+    stated = stated if isinstance(stated, dict) else {}
+    check_rig(report, usd_skel.shape_names(mesh), stated.get("lip_error_mm"), stated.get("face_error_mm"))
     return times, frames
 
 
@@ -195,8 +200,10 @@ def _check_package(report: Report, path: Path, stage) -> None:
     report.add("package", not problems, detail)
 
 
-def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points") -> None:
-    """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame."""
+def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points",
+                        frames=()) -> None:
+    """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame; for
+    blend shapes, the extent at each time (sampled or not) bounding the blended `frames`."""
     from pxr import UsdGeom
 
     count = len(times)
@@ -209,8 +216,14 @@ def _check_time_samples(report: Report, stage, mesh, times: list[float], what: s
             f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected 0..{count - 1}"
         )
     extent = mesh.GetExtentAttr()
-    if what != "points":  # blend shapes deform the rest pose, whose extent is not sampled
-        pass
+    if what != "points":  # blend shapes deform the rest pose: the extent must hold every blended frame
+        for t, frame in zip(times, frames, strict=False):
+            box = np.asarray(extent.Get(t) or [], dtype=np.float64)
+            points = np.asarray(frame, dtype=np.float64)
+            slack = 1e-6 * max(float(np.abs(points).max(initial=0.0)), 1.0)
+            if box.shape != (2, 3) or (points < box[0] - slack).any() or (points > box[1] + slack).any():
+                problems.append(f"extent at time {t:g} does not bound the blended points")
+                break
     elif list(extent.GetTimeSamples()) != times:
         problems.append("extent is not sampled at the same times as points")
     else:
