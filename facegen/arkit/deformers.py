@@ -145,7 +145,7 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     X, corner, near, lat = f["mouth_x"], f["corner"], f["near"], f["lat"]
     upper = f["upper_side"]
     sgn = np.where(upper, 1.0, -1.0)
-    w_up, w_lo = f["w_up"], f["w_lo"]
+    w_lo = f["w_lo"]
     out["mouthFunnel"] = d.delta(lip_funnel=1.0)
     out["mouthPucker"] = d.delta(lip_round=1.0)
     out["mouthRollLower"] = d.delta(lower_lip_tuck=1.0)
