@@ -302,7 +302,10 @@ def open_stage(path: str | os.PathLike):
 
 def _tf_message(exc: Exception) -> str:
     """The first message of a pxr error, on one line (pxr's text holds C++ function names and files)."""
-    text = str(exc)
+    try:
+        text = str(exc)
+    except Exception:  # pxr quotes the file's bytes, which need not be UTF-8
+        text = "the file's text is not valid UTF-8"
     found = re.findall(r" : '([^']*)'", text)
     return found[0] if found else " ".join(text.split())[:200]
 
