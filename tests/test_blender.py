@@ -144,8 +144,10 @@ def write_audio2face(path: Path, weights: np.ndarray, fps: float) -> Path:
 
 
 def write_live_link(path: Path, weights: np.ndarray, fps: int) -> Path:
+    """`weights` [T, 52] in ARKIT_NAMES order, written in the CSV's own column order."""
     rows = [",".join(LIVE_LINK_COLUMNS)]
-    for i, row in enumerate(weights):
+    columns = [ARKIT_NAMES.index(arkit_name(c)) for c in LIVE_LINK_COLUMNS[2:2 + len(ARKIT_NAMES)]]
+    for i, row in enumerate(weights[:, columns]):
         seconds, frame = divmod(i, fps)
         timecode = f"10:{seconds // 60:02d}:{seconds % 60:02d}:{frame:02d}.{round(1000 * frame / fps):03d}"
         rows.append(",".join([timecode, "61", *(f"{w:.6f}" for w in row), *["0"] * 9]))
@@ -172,8 +174,9 @@ def test_read_weights_json_and_csv(tmp_path):
     np.testing.assert_array_equal(clip["frames"], np.arange(70))
     write_wav(np.zeros(16000, np.float32), 16000, tmp_path / "b.wav")
     clip = facegen_arkit.read_weights(write_live_link(tmp_path / "b.csv", weights, 30))
-    assert clip["names"] == list(ARKIT_NAMES) and clip["fps"] == 30 and clip["audio"] == str(tmp_path / "b.wav")
-    np.testing.assert_allclose(clip["weights"], weights, atol=1e-6)
+    assert sorted(clip["names"]) == sorted(ARKIT_NAMES) and clip["fps"] == 30 and clip["audio"] == str(tmp_path / "b.wav")
+    by_name = [clip["names"].index(n) for n in ARKIT_NAMES]  # the CSV's order: JawRight before JawLeft, ...
+    np.testing.assert_allclose(clip["weights"][:, by_name], weights, atol=1e-6)
     np.testing.assert_array_equal(clip["frames"], np.arange(70))  # the ".mmm" of whole-frame rows is ignored
     # 60 rows a second on a 30 fps timecode: two rows per whole frame, told apart by the sub-frame
     lines = (tmp_path / "b.csv").read_text().splitlines()[:3]
@@ -269,7 +272,7 @@ def test_blender_applies_arkit_weights_by_name(blender_python, arkit_files, tmp_
     assert_keyed(json_run["values"]["Character"], expected_values(weights["json"], CHARACTER_KEYS, frames))
 
     done = csv_run["import"]  # fps from the Timecode frames; no WAV beside it: a warning, no sound
-    assert done["frames"] == 45 and done["unmatched"] == unmatched and done["sound"] is None
+    assert done["frames"] == 45 and sorted(done["unmatched"]) == sorted(unmatched) and done["sound"] is None
     assert done["warnings"] and "no sound" in done["warnings"][0]
     assert (csv_run["scene"]["fps"], csv_run["scene"]["frame_end"], csv_run["scene"]["sounds"]) == (30, 44, [])
     assert_keyed(csv_run["values"]["Character"], expected_values(weights["csv"], CHARACTER_KEYS, frames))
