@@ -31,6 +31,7 @@ only; lists of one scalar type become typed arrays, other lists JSON strings)}.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -42,7 +43,7 @@ from facegen import __version__
 from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
-from facegen.exchange import usd_skel
+from facegen.exchange import usd_clips, usd_skel
 from facegen.exchange.basis import stored, writer_basis
 from facegen.exchange.formats import by_module
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
@@ -69,6 +70,7 @@ def write(
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
     write_audio: bool = True,
     audio_source: str | os.PathLike | None = None,
+    clips: str | int = "auto",
 ) -> list[Path]:
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
@@ -77,8 +79,12 @@ def write(
     "pca", whose `morph_targets` fixes their number K, an int, or "all" for one per frame (by default K is
     the fewest keeping every vertex within `tolerance` x the face's size, default pca.DEFAULT_TOLERANCE),
     or "arkit", the 52 ARKit shapes named by ARKit's names (the face needs the rig's regions).
+    `clips` (points mode): "auto" writes a clip longer than usd_clips.CLIP_THRESHOLD frames as USD value
+    clips, one layer per usd_clips.CLIP_FRAMES frames in the folder `out.clips/` beside `out.usdc`, so that
+    memory stays bounded (usd_clips.py); "never" always writes one file; a number N writes value clips of N
+    frames whatever the length.
     Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio`
-    is true. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
+    is true, then the clip folder's files (rest layer, manifest, clip layers) when there are clips. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
     to `clip.usda`) it is referenced, not overwritten.
     """
     from pxr import Sdf, Usd
@@ -90,8 +96,12 @@ def write(
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
     basis = _check_mode(anim, mode, rig, morph_targets, tolerance)
+    per_clip = usd_clips.clip_frames(clips, anim.num_frames, basis is None)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
-    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
+    clip_files: list[Path] = []
+    folder = usd_clips.folder_of(path)
+    with (atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav),
+          usd_clips.atomic_folder(folder) if per_clip else contextlib.nullcontext() as work):
         layer = Sdf.Layer.CreateNew(str(tmp))
         if layer is None:
             raise FacegenError(f"cannot create USD layer {tmp}: check the output folder")
@@ -100,7 +110,12 @@ def write(
         if basis is None:
             _author_stage(stage, anim, meters_per_unit, audio_asset)
             del stage
-            _author_samples(layer, anim)
+            if per_clip:
+                usd_clips.author_clip_set(layer, MESH_PATH, path, anim.num_frames, per_clip)
+                written = usd_clips.write_clip_layers(anim, work, path.stem, MESH_PATH, per_clip)
+                clip_files = [folder / f.name for f in written]
+            else:
+                _author_samples(layer, anim)
         else:
             names, offsets, weights = stored(basis)
             info = {"reconstruction": usd_skel.layer_info(basis, len(names))}
@@ -113,7 +128,9 @@ def write(
         if not layer.Save():
             raise FacegenError(f"cannot write {path}: check free disk space and permissions")
         del layer
-    return [path] if wav is None else [path, wav]
+    if not per_clip:
+        usd_clips.remove_stale(path)
+    return [path, *([] if wav is None else [wav]), *clip_files]
 
 
 def _check_mode(anim: Animation, mode: str | None, rig: str, morph_targets: int | str | None,
