@@ -35,6 +35,7 @@ import contextlib
 import json
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -321,7 +322,7 @@ def _tf_message(exc: Exception) -> str:
     """The first message of a pxr error, on one line (pxr's text holds C++ function names and files)."""
     try:
         text = str(exc)
-    except Exception:  # pxr quotes the file's bytes, which need not be UTF-8
+    except UnicodeError:  # pxr quotes the file's bytes, which need not be UTF-8
         text = "the file's text is not valid UTF-8"
     found = re.findall(r" : '([^']*)'", text)
     return found[0] if found else " ".join(text.split())[:200]
@@ -365,14 +366,40 @@ def mesh_faces(mesh) -> np.ndarray:
     return indices.reshape(-1, 3)
 
 
-def points_samples(mesh) -> tuple[list[float], list[np.ndarray]]:
-    """The time codes of the mesh's `points` samples and the [V, 3] float32 array at each."""
+class PointsFrames:
+    """A mesh's `points` at its time samples as a read-only sequence of [V, 3] float32 arrays, each read from
+    the stage when asked: a long clip (value clips or one file) is never held whole."""
+
+    def __init__(self, attr, times: list[float]) -> None:
+        self.attr, self.times = attr, times
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        value = self.attr.Get(self.times[i])  # None where a value clip is missing
+        return np.asarray(value if value is not None else np.zeros((0, 3)), dtype=np.float32)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return (self[i] for i in range(len(self)))
+
+
+def points_samples(mesh) -> tuple[list[float], PointsFrames]:
+    """The time codes of the mesh's `points` samples and the [V, 3] float32 arrays at them (read lazily)."""
     attr = mesh.GetPointsAttr()
     times = list(attr.GetTimeSamples())
-    return times, [np.asarray(attr.Get(t), dtype=np.float32) for t in times]
+    return times, PointsFrames(attr, times)
 
 
-def frames_of(stage, mesh) -> tuple[list[float], list[np.ndarray] | np.ndarray]:
+def clip_sets(mesh) -> dict:
+    """The mesh prim's value clip sets (UsdClipsAPI's `clips` dictionary: name -> assetPaths, active, times,
+    primPath, manifestAssetPath), empty when its points are not in value clips."""
+    from pxr import Usd
+
+    return dict(Usd.ClipsAPI(mesh.GetPrim()).GetClips() or {})
+
+
+def frames_of(stage, mesh) -> tuple[list[float], PointsFrames | np.ndarray]:
     """The mesh's animation: its `points` samples, or, when it has none and is bound to blend shapes, the
     points blended from its UsdSkel blend shapes at each blendShapeWeights sample ([T, V, 3] float32).
     A broken skel binding is a FacegenError."""
@@ -437,9 +464,13 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     _, frames = frames_of(stage, mesh)
     if len(frames) == 0:
         raise FacegenError(f"{path}: mesh {mesh.GetPath()} has no points time samples: nothing to read")
-    if len({len(f) for f in frames}) != 1:
-        raise FacegenError(f"{path}: the points samples have different vertex counts: the file is broken")
-    vertices = np.stack(frames)
+    vertices = frames if isinstance(frames, np.ndarray) else None
+    for i, frame in enumerate(() if vertices is not None else frames):  # into one array as they are read: a long clip is not held twice
+        if vertices is None:
+            vertices = np.empty((len(frames), *frame.shape), np.float32)
+        if frame.shape != vertices.shape[1:]:
+            raise FacegenError(f"{path}: the points samples have different vertex counts: the file is broken")
+        vertices[i] = frame
     file_fps = stage_fps(stage)
     if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-6:
         raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")

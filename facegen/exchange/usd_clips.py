@@ -45,6 +45,15 @@ CLIP_SET = "default"
 CHOICES = ("auto", "never")
 
 
+def parse_clips(text: str | None) -> int | str | None:
+    """The `--usd-clips` value: auto, never or a positive number of frames per clip layer (an int)."""
+    if text is None:
+        return None
+    value = int(text) if text.strip().isdigit() else text.strip().lower()
+    clip_frames(value, 1, True)  # refuses anything else
+    return value
+
+
 def clip_frames(option: str | int, frames: int, points: bool) -> int | None:
     """Frames per clip layer for the `clips` write option, or None for one file.
 
@@ -167,8 +176,11 @@ def _save(layer, path: Path) -> None:
 def atomic_folder(target: Path) -> Iterator[Path]:
     """Yield a new temporary folder beside `target`; on success it replaces `target` (an older folder of the
     same name is removed), on failure it is removed."""
-    check_writable(target)
     parent = target.parent if str(target.parent) else Path(".")
+    if target.exists() and not target.is_dir():
+        raise FacegenError(f"{target} is a file, so facegen cannot write the clip folder there: rename or remove "
+                           "it, or choose another -o name")
+    check_writable(parent / f"{target.name}.new")  # the folder's parent is writable, the name not too long
     try:
         work = Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=parent))
     except OSError as exc:
