@@ -63,8 +63,9 @@ def long_clip(minutes: float):
     return Animation(frame_stream(bundle, states, face.vertices), face.faces, fps, face.vertices, audio, 16000)
 
 
-def usd_long(minutes: float, clips: str) -> None:
-    """Write and validate a long points .usdc; print seconds, bytes and peak RSS after each step."""
+def usd_long(minutes: float, clips: str | None) -> None:
+    """Write and validate a long points .usdc; print seconds, bytes and peak RSS after each step. `clips`
+    None: the writer's default (and no `clips` option: runs on facegen versions before value clips too)."""
     from facegen.exchange import write_animation
     from facegen.runtime import peak_rss_mb
     from facegen.validate import validate
@@ -77,7 +78,8 @@ def usd_long(minutes: float, clips: str) -> None:
     with tempfile.TemporaryDirectory(dir=Path.cwd()) as folder:
         out = Path(folder) / "long.usdc"
         start = time.perf_counter()
-        files = write_animation(anim, out, clips=int(clips) if clips.isdigit() else clips)
+        options = {} if clips is None else {"clips": int(clips) if clips.isdigit() else clips}
+        files = write_animation(anim, out, **options)
         written, wrote = time.perf_counter() - start, peak_rss_mb()
         size = sum(f.stat().st_size for f in files)
         print(f"write (--usd-clips {clips}): {written:.1f} s, {len(files)} files, {size / 1e9:.2f} GB; "
@@ -106,7 +108,7 @@ def main() -> None:
     parser.add_argument("--npy", help="a [T, 3V] animation to write instead of the rig clip")
     parser.add_argument("--template", help="the template mesh of --npy")
     parser.add_argument("--usd-long", type=float, metavar="MINUTES", help="the long-clip USD memory case")
-    parser.add_argument("--usd-clips", default="auto", help="with --usd-long: auto, never or frames per clip")
+    parser.add_argument("--usd-clips", help="with --usd-long: auto, never or frames per clip (default: the writer's)")
     args = parser.parse_args()
     if args.usd_long:
         usd_long(args.usd_long, args.usd_clips)

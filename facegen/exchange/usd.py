@@ -16,6 +16,10 @@ Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate)
                    playbackMode onceFromStart (play once from startTime to the audio's end); startTime
                    is its schema fallback 0 (authoring a timecode forces usdc crate 0.9 and a warning)
 
+A points clip longer than usd_clips.CLIP_THRESHOLD frames (`clips="auto"`) keeps this layout, but its
+`points` and `extent` samples (and their rest-pose defaults) live in USD value clips in `out.clips/` beside
+the file, stitched by a clip set on /Face/Mesh, so that the frames are never all in memory (usd_clips.py).
+
 With `mode="blendshapes"` the frames are UsdSkel blend shapes instead of `points` samples: /Face is a
 SkelRoot, and a Skeleton, a SkelAnimation with one blendShapeWeights sample per frame and one BlendShape
 per target of the rig's basis (exchange/basis.py: PCA, or with `rig="arkit"` the 52 ARKit shapes) are
@@ -304,6 +308,11 @@ def open_stage(path: str | os.PathLike):
     path = Path(path)
     if not path.is_file():
         raise FacegenError(f"USD file {path} does not exist: pass an existing .usda/.usdc/.usd/.usdz file")
+    # usd-core maps crate files into memory: every frame read stays resident (as file pages, counted in the
+    # process's RSS) while the stage is open, 4.2 GB for a 10-minute clip. Reading with pread instead keeps
+    # only the frame being read. pxr reads the setting once, at the first crate file it opens; a value the
+    # user set wins.
+    os.environ.setdefault("USDC_USE_PREAD", "1")
     try:
         cached = Sdf.Layer.Find(str(path))
         if cached is not None:  # a layer still held in this process: read the file as it is now
