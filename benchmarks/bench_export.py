@@ -8,6 +8,12 @@ and the MP3 encoder delay that was compensated. The Khronos validator runs once 
 Node and `make node-deps` are there.
 
     python benchmarks/bench_export.py [--seconds 60] [--runs 3] [--tolerance 1e-3] [--npy F --template M]
+
+Long-clip memory case (issue 13): `--usd-long MINUTES [--usd-clips auto|never|N]` writes MINUTES of frames on
+the default model's face (23,370 vertices) as a points .usdc from a FrameStream (the default model's output
+layer over smooth random decoder states: no audio runs through the network), then validates it, and prints
+the peak resident memory (VmHWM) after each step. Run it once per `--usd-clips` value, each in a new process:
+`never` is the one-file layer (the writer before value clips), `auto` the value clips.
 """
 
 from __future__ import annotations
@@ -39,6 +45,59 @@ def animation(args):
     return rig_clip(round(args.seconds * args.fps), fps=args.fps), "procedural face + rig, random phones"
 
 
+def long_clip(minutes: float):
+    """A FrameStream animation of `minutes` on the default model's face: its output layer over smooth random
+    decoder states (LSTM-like values in -1..1), with a quiet noise track as long as the frames."""
+    from facegen.animation import Animation
+    from facegen.bundle import load_bundle
+    from facegen.inference import frame_stream
+
+    bundle = load_bundle()
+    fps = bundle.features.fps
+    frames = round(minutes * 60 * fps)
+    rng = np.random.default_rng(0)
+    width = bundle.model.fc_out.weight.shape[1]
+    states = np.tanh(np.cumsum(0.05 * rng.standard_normal((frames, width)), axis=0)).astype(np.float32)
+    face = bundle.template
+    audio = (0.01 * rng.standard_normal(round(frames / fps * 16000))).astype(np.float32)
+    return Animation(frame_stream(bundle, states, face.vertices), face.faces, fps, face.vertices, audio, 16000)
+
+
+def usd_long(minutes: float, clips: str | None) -> None:
+    """Write and validate a long points .usdc; print seconds, bytes and peak RSS after each step. `clips`
+    None: the writer's default (and no `clips` option: runs on facegen versions before value clips too)."""
+    from facegen.exchange import write_animation
+    from facegen.runtime import peak_rss_mb
+    from facegen.validate import validate
+
+    t0 = time.perf_counter()
+    anim = long_clip(minutes)
+    made = peak_rss_mb()
+    print(f"animation: {anim.num_frames} frames x {anim.num_vertices} vertices (a FrameStream), "
+          f"made in {time.perf_counter() - t0:.1f} s; peak RSS {made:.0f} MB", flush=True)
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as folder:
+        out = Path(folder) / "long.usdc"
+        start = time.perf_counter()
+        options = {} if clips is None else {"clips": int(clips) if clips.isdigit() else clips}
+        files = write_animation(anim, out, **options)
+        written, wrote = time.perf_counter() - start, peak_rss_mb()
+        size = sum(f.stat().st_size for f in files)
+        print(f"write (--usd-clips {clips}): {written:.1f} s, {len(files)} files, {size / 1e9:.2f} GB; "
+              f"peak RSS {wrote:.0f} MB", flush=True)
+        start = time.perf_counter()
+        report = validate(out)
+        checked, validated = time.perf_counter() - start, peak_rss_mb()
+        print(f"validate: {'OK' if report.ok else 'FAILED'} in {checked:.1f} s; peak RSS {validated:.0f} MB")
+        if not report.ok:
+            print(report.to_text())
+    print(json.dumps({"benchmark": "usd_long", "clips": clips, "frames": anim.num_frames,
+                      "vertices": anim.num_vertices, "files": len(files), "bytes": size,
+                      "write_seconds": round(written, 1), "peak_rss_mb_animation": round(made),
+                      "peak_rss_mb_write": round(wrote), "validate_seconds": round(checked, 1),
+                      "peak_rss_mb_validate": round(validated), "valid": report.ok,
+                      "memory_ok": wrote <= 2048}))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0)
@@ -48,7 +107,12 @@ def main() -> None:
     parser.add_argument("--morph-targets", default=None, help="K or all (default: from the tolerance)")
     parser.add_argument("--npy", help="a [T, 3V] animation to write instead of the rig clip")
     parser.add_argument("--template", help="the template mesh of --npy")
+    parser.add_argument("--usd-long", type=float, metavar="MINUTES", help="the long-clip USD memory case")
+    parser.add_argument("--usd-clips", help="with --usd-long: auto, never or frames per clip (default: the writer's)")
     args = parser.parse_args()
+    if args.usd_long:
+        usd_long(args.usd_long, args.usd_clips)
+        return
 
     from facegen.exchange import gltf, write_animation
     from facegen.exchange.pca import DEFAULT_TOLERANCE, parse_morph_targets

@@ -49,6 +49,12 @@ def _morph_targets(_ctx, _param, value: str | None) -> int | str | None:
     return parse_morph_targets(value)
 
 
+def _usd_clips(_ctx, _param, value: str | None) -> int | str | None:
+    from facegen.exchange.usd_clips import parse_clips
+
+    return parse_clips(value)
+
+
 def _one_of(**options) -> None:
     given = [k for k, v in options.items() if v]
     if len(given) > 1:
@@ -96,6 +102,9 @@ def cli(debug: bool) -> None:
               help=f"Output file: {' '.join(extensions())}.")
 @click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
               help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
+@click.option("--usd-clips", metavar="auto|never|N", callback=_usd_clips,
+              help="USD points: auto (default) writes clips over 2 minutes as value clips in OUTPUT.clips/ "
+                   "(bounded memory), never keeps one file, N writes value clips of N frames.")
 @click.option("--rig", type=click.Choice(["pca", "arkit"]),
               help="glTF / USD: the morph targets: pca (default: a PCA of the clip, the fewest targets) or arkit "
                    "(Apple's 52 ARKit blend shapes, named as ARKit names them, with their fitted weights; "
@@ -111,7 +120,7 @@ def cli(debug: bool) -> None:
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output, usd_mode,
-            rig, morph_targets, tolerance, preview, device, quiet):
+            usd_clips, rig, morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
     from facegen.exchange import check_write_options, format_module, format_of, write_animation
@@ -125,7 +134,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         check_writable(Path(output).with_suffix(".wav"))  # the sidecar WAV
     _protect_inputs([output, Path(output).with_suffix(".wav"), preview], transcript=text_file,
                     alignment=alignment, model=model, template=template)
-    options = {k: v for k, v in (("mode", usd_mode), ("rig", rig), ("morph_targets", morph_targets),
+    options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig), ("morph_targets", morph_targets),
                                  ("tolerance", tolerance)) if v is not None}
     check_write_options(output, options)
     if rig == "arkit" or format_of(output).arkit:  # ARKit weights need the rig's regions: checked before any work

@@ -25,7 +25,8 @@ if TYPE_CHECKING:
     from facegen.animation import Animation
     from facegen.mesh import Mesh
 
-OPTION_FLAGS = {"mode": "--usd-mode", "rig": "--rig", "morph_targets": "--morph-targets", "tolerance": "--tolerance"}
+OPTION_FLAGS = {"mode": "--usd-mode", "rig": "--rig", "morph_targets": "--morph-targets", "tolerance": "--tolerance",
+                "clips": "--usd-clips"}
 
 
 def extensions() -> list[str]:

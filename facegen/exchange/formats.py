@@ -38,12 +38,13 @@ class Format:
 
 FORMATS = (
     Format("USD", "facegen.exchange.usd", (".usda", ".usdc", ".usd"),
-           ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.usd",
+           ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit", "clips"), "facegen.validate.usd",
            streams=True, whole_clip=("mode", "blendshapes")),  # blendshapes: a PCA over the whole clip
     Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True),
     Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"),
            ("rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.gltf"),
-    Format("USDZ", "facegen.exchange.usdz", (".usdz",), ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit"),
+    Format("USDZ", "facegen.exchange.usdz", (".usdz",),
+           ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit", "clips"),
            "facegen.validate.usd"),
     # ARKit's 52 shape weights per frame (fitted on facegen's face): Audio2Face JSON, Live Link Face CSV
     Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit", streams=True,

@@ -16,6 +16,10 @@ Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate)
                    playbackMode onceFromStart (play once from startTime to the audio's end); startTime
                    is its schema fallback 0 (authoring a timecode forces usdc crate 0.9 and a warning)
 
+A points clip longer than usd_clips.CLIP_THRESHOLD frames (`clips="auto"`) keeps this layout, but its
+`points` and `extent` samples (and their rest-pose defaults) live in USD value clips in `out.clips/` beside
+the file, stitched by a clip set on /Face/Mesh, so that the frames are never all in memory (usd_clips.py).
+
 With `mode="blendshapes"` the frames are UsdSkel blend shapes instead of `points` samples: /Face is a
 SkelRoot, and a Skeleton, a SkelAnimation with one blendShapeWeights sample per frame and one BlendShape
 per target of the rig's basis (exchange/basis.py: PCA, or with `rig="arkit"` the 52 ARKit shapes) are
@@ -31,9 +35,11 @@ only; lists of one scalar type become typed arrays, other lists JSON strings)}.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +48,7 @@ from facegen import __version__
 from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
-from facegen.exchange import usd_skel
+from facegen.exchange import usd_clips, usd_skel
 from facegen.exchange.basis import stored, writer_basis
 from facegen.exchange.formats import by_module
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
@@ -69,6 +75,7 @@ def write(
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
     write_audio: bool = True,
     audio_source: str | os.PathLike | None = None,
+    clips: str | int = "auto",
 ) -> list[Path]:
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
@@ -77,8 +84,12 @@ def write(
     "pca", whose `morph_targets` fixes their number K, an int, or "all" for one per frame (by default K is
     the fewest keeping every vertex within `tolerance` x the face's size, default pca.DEFAULT_TOLERANCE),
     or "arkit", the 52 ARKit shapes named by ARKit's names (the face needs the rig's regions).
+    `clips` (points mode): "auto" writes a clip longer than usd_clips.CLIP_THRESHOLD frames as USD value
+    clips, one layer per usd_clips.CLIP_FRAMES frames in the folder `out.clips/` beside `out.usdc`, so that
+    memory stays bounded (usd_clips.py); "never" always writes one file; a number N writes value clips of N
+    frames whatever the length.
     Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio`
-    is true. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
+    is true, then the clip folder's files (rest layer, manifest, clip layers) when there are clips. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
     to `clip.usda`) it is referenced, not overwritten.
     """
     from pxr import Sdf, Usd
@@ -90,8 +101,12 @@ def write(
     if not meters_per_unit > 0:
         raise FacegenError(f"meters per unit must be positive, got {meters_per_unit}")
     basis = _check_mode(anim, mode, rig, morph_targets, tolerance)
+    per_clip = usd_clips.clip_frames(clips, anim.num_frames, basis is None)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
-    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
+    clip_files: list[Path] = []
+    folder = usd_clips.folder_of(path)
+    with (atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav),
+          usd_clips.atomic_folder(folder) if per_clip else contextlib.nullcontext() as work):
         layer = Sdf.Layer.CreateNew(str(tmp))
         if layer is None:
             raise FacegenError(f"cannot create USD layer {tmp}: check the output folder")
@@ -100,7 +115,12 @@ def write(
         if basis is None:
             _author_stage(stage, anim, meters_per_unit, audio_asset)
             del stage
-            _author_samples(layer, anim)
+            if per_clip:
+                usd_clips.author_clip_set(layer, MESH_PATH, path, anim.num_frames, per_clip)
+                written = usd_clips.write_clip_layers(anim, work, path.stem, MESH_PATH, per_clip)
+                clip_files = [folder / f.name for f in written]
+            else:
+                _author_samples(layer, anim)
         else:
             names, offsets, weights = stored(basis)
             info = {"reconstruction": usd_skel.layer_info(basis, len(names))}
@@ -113,7 +133,9 @@ def write(
         if not layer.Save():
             raise FacegenError(f"cannot write {path}: check free disk space and permissions")
         del layer
-    return [path] if wav is None else [path, wav]
+    if not per_clip:
+        usd_clips.remove_stale(path)
+    return [path, *([] if wav is None else [wav]), *clip_files]
 
 
 def _check_mode(anim: Animation, mode: str | None, rig: str, morph_targets: int | str | None,
@@ -286,6 +308,11 @@ def open_stage(path: str | os.PathLike):
     path = Path(path)
     if not path.is_file():
         raise FacegenError(f"USD file {path} does not exist: pass an existing .usda/.usdc/.usd/.usdz file")
+    # usd-core maps crate files into memory: every frame read stays resident (as file pages, counted in the
+    # process's RSS) while the stage is open, 4.2 GB for a 10-minute clip. Reading with pread instead keeps
+    # only the frame being read. pxr reads the setting once, at the first crate file it opens; a value the
+    # user set wins.
+    os.environ.setdefault("USDC_USE_PREAD", "1")
     try:
         cached = Sdf.Layer.Find(str(path))
         if cached is not None:  # a layer still held in this process: read the file as it is now
@@ -304,7 +331,7 @@ def _tf_message(exc: Exception) -> str:
     """The first message of a pxr error, on one line (pxr's text holds C++ function names and files)."""
     try:
         text = str(exc)
-    except Exception:  # pxr quotes the file's bytes, which need not be UTF-8
+    except UnicodeError:  # pxr quotes the file's bytes, which need not be UTF-8
         text = "the file's text is not valid UTF-8"
     found = re.findall(r" : '([^']*)'", text)
     return found[0] if found else " ".join(text.split())[:200]
@@ -348,14 +375,40 @@ def mesh_faces(mesh) -> np.ndarray:
     return indices.reshape(-1, 3)
 
 
-def points_samples(mesh) -> tuple[list[float], list[np.ndarray]]:
-    """The time codes of the mesh's `points` samples and the [V, 3] float32 array at each."""
+class PointsFrames:
+    """A mesh's `points` at its time samples as a read-only sequence of [V, 3] float32 arrays, each read from
+    the stage when asked: a long clip (value clips or one file) is never held whole."""
+
+    def __init__(self, attr, times: list[float]) -> None:
+        self.attr, self.times = attr, times
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        value = self.attr.Get(self.times[i])  # None where a value clip is missing
+        return np.asarray(value if value is not None else np.zeros((0, 3)), dtype=np.float32)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return (self[i] for i in range(len(self)))
+
+
+def points_samples(mesh) -> tuple[list[float], PointsFrames]:
+    """The time codes of the mesh's `points` samples and the [V, 3] float32 arrays at them (read lazily)."""
     attr = mesh.GetPointsAttr()
     times = list(attr.GetTimeSamples())
-    return times, [np.asarray(attr.Get(t), dtype=np.float32) for t in times]
+    return times, PointsFrames(attr, times)
 
 
-def frames_of(stage, mesh) -> tuple[list[float], list[np.ndarray] | np.ndarray]:
+def clip_sets(mesh) -> dict:
+    """The mesh prim's value clip sets (UsdClipsAPI's `clips` dictionary: name -> assetPaths, active, times,
+    primPath, manifestAssetPath), empty when its points are not in value clips."""
+    from pxr import Usd
+
+    return dict(Usd.ClipsAPI(mesh.GetPrim()).GetClips() or {})
+
+
+def frames_of(stage, mesh) -> tuple[list[float], PointsFrames | np.ndarray]:
     """The mesh's animation: its `points` samples, or, when it has none and is bound to blend shapes, the
     points blended from its UsdSkel blend shapes at each blendShapeWeights sample ([T, V, 3] float32).
     A broken skel binding is a FacegenError."""
@@ -420,9 +473,13 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     _, frames = frames_of(stage, mesh)
     if len(frames) == 0:
         raise FacegenError(f"{path}: mesh {mesh.GetPath()} has no points time samples: nothing to read")
-    if len({len(f) for f in frames}) != 1:
-        raise FacegenError(f"{path}: the points samples have different vertex counts: the file is broken")
-    vertices = np.stack(frames)
+    vertices = frames if isinstance(frames, np.ndarray) else None
+    for i, frame in enumerate(() if vertices is not None else frames):  # into one array as they are read: a long clip is not held twice
+        if vertices is None:
+            vertices = np.empty((len(frames), *frame.shape), np.float32)
+        if frame.shape != vertices.shape[1:]:
+            raise FacegenError(f"{path}: the points samples have different vertex counts: the file is broken")
+        vertices[i] = frame
     file_fps = stage_fps(stage)
     if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-6:
         raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")

@@ -5,6 +5,8 @@
     out.usdc   the stage exactly as usd.py writes it (points or blendshapes mode), the package's root layer
     out.wav    the clip's audio (16-bit PCM); the stage's SpatialAudio filePath is @./out.wav@, which
                resolves inside the package (`/abs/out.usdz[out.wav]`)
+    out.clips/ a long clip's value clips, rest layer and manifest (usd_clips.py), which
+               CreateNewUsdzPackage follows from the stage's clip set and sublayer
 
 No sidecar is written beside the package: it is self-contained. The package is made with
 UsdUtils.CreateNewUsdzPackage from a temporary folder and renamed into place, so a failed write leaves

@@ -18,6 +18,10 @@ errors.
   reconstruction  blendshapes: the error facegen stated in customLayerData is within its tolerance
   rig             blendshapes: the shapes' names, ARKit's or not (validate/rig.py)
   package         USDZ: the package's files (the root layer first, its WAV), the audio resolves inside it
+  clips           value clips (a long points clip, exchange/usd_clips.py): every clip layer and the manifest
+                  resolve and open, the clips are active in time order from frame 0, each clip layer's own
+                  points samples lie within its active range; the frames are then read through the stage, one
+                  at a time (never all held), so every other check sees the composed animation
   finite, displacement   as in checks.py
   audio           the SpatialAudio prim's file resolves relative to the layer, or inside the .usdz, and
                   reads; `audio_path` replaces it when given ("audio file")
@@ -63,6 +67,8 @@ def check(report: Report, path: Path, expected: Expected) -> None:
 
     if path.suffix.lower() in usdz_format.FORMAT.extensions:
         _check_package(report, path, stage)
+    if usd_format.clip_sets(mesh):
+        _check_clips(report, mesh)
     rest = usd_format.rest_points(mesh)
     blended = not mesh.GetPointsAttr().GetNumTimeSamples() and usd_skel.has_blendshapes(mesh)
     if blended:
@@ -74,12 +80,13 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     source = (
         "the template" if template is not None else "the file's rest pose" if rest is not None else "frame 0"
     )
-    counts = sorted({len(f) for f in frames})
+    lengths = [len(f) for f in frames]  # points: one pass reading each frame through the stage
+    counts = sorted(set(lengths))
     if len(frames) == 0:
         what = "blend shape frames" if blended else "points time samples"
         report.add("vertex count", False, f"the mesh has no {what}")
     else:
-        wrong = [i for i, f in enumerate(frames) if len(f) != count]
+        wrong = [i for i, n in enumerate(lengths) if n != count]
         report.add(
             "vertex count",
             not wrong,
@@ -200,6 +207,40 @@ def _check_package(report: Report, path: Path, stage) -> None:
     report.add("package", not problems, detail)
 
 
+def _check_clips(report: Report, mesh) -> None:
+    """Value clips: each clip set's layers and manifest open, active in time order from 0, and each clip
+    layer's own points samples within the stage times where it is active."""
+    from pxr import Sdf
+
+    problems, described = [], []
+    for name, clip_set in usd_format.clip_sets(mesh).items():
+        assets = list(clip_set.get("assetPaths", []))
+        active = [tuple(a) for a in clip_set.get("active", [])]
+        starts = [a[0] for a in active]
+        if [int(a[1]) for a in active] != list(range(len(assets))) or starts != sorted(starts) or starts[:1] != [0]:
+            problems.append(f"clip set {name!r}: active {active[:4]} does not play its {len(assets)} clips in order "
+                            "from time 0")
+        manifest = clip_set.get("manifestAssetPath")
+        identity = all(a == b for a, b in clip_set.get("times", []))  # clip time = stage time (facegen's)
+        for k, asset in enumerate(assets):
+            layer = Sdf.Layer.FindOrOpen(asset.resolvedPath) if asset.resolvedPath else None
+            if layer is None:
+                problems.append(f"clip layer {asset.path} does not resolve or open")
+                continue
+            spec = layer.GetAttributeAtPath(Sdf.Path(str(clip_set.get("primPath", mesh.GetPath()))).AppendProperty(
+                "points"))
+            times = list(layer.ListTimeSamplesForPath(spec.path)) if spec else []
+            end = starts[k + 1] if k + 1 < len(starts) else float("inf")
+            outside = identity and k < len(starts) and times and (times[0] < starts[k] or times[-1] >= end)
+            if not times or outside:
+                problems.append(f"clip layer {asset.path} has no points samples within its active times")
+            del layer
+        if manifest is not None and manifest.path and not manifest.resolvedPath:
+            problems.append(f"clip manifest {manifest.path} does not resolve")
+        described.append(f"{name}: {len(assets)} clip layers" + (f" ({assets[0].path} ...)" if assets else ""))
+    report.add("clips", not problems, "; ".join(problems[:3]) or "; ".join(described) + ", all resolve")
+
+
 def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points",
                         frames=()) -> None:
     """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame; for
@@ -229,7 +270,11 @@ def _check_time_samples(report: Report, stage, mesh, times: list[float], what: s
     else:
         points = mesh.GetPointsAttr()
         for t in times:
-            want = np.asarray(UsdGeom.PointBased.ComputeExtent(points.Get(t)), dtype=np.float64)
+            value = points.Get(t)
+            if value is None:  # a value clip that does not open
+                problems.append(f"no points at time {t:g}")
+                break
+            want = np.asarray(UsdGeom.PointBased.ComputeExtent(value), dtype=np.float64)
             have = np.asarray(extent.Get(t), dtype=np.float64)
             if have.shape != (2, 3) or not np.allclose(have, want, rtol=1e-5, atol=1e-6):
                 problems.append(f"extent at time {t:g} does not bound the points")
