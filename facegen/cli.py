@@ -536,11 +536,16 @@ def _run(argv: list[str], debug: bool) -> int:
 
 
 def _exit_now(code: int) -> None:
-    """End the process with `code` without the interpreter's teardown: atexit handlers run first (the profile
-    report, multiprocessing's clean-up), then stdout and stderr are flushed."""
+    """End the process with `code` without the interpreter's teardown, after what the interpreter would still do
+    that matters: wait for non-daemon threads, run the atexit handlers (the profile report, multiprocessing's
+    clean-up), flush stdout and stderr."""
     import atexit
     import os
+    import threading
 
+    for thread in threading.enumerate():
+        if thread is not threading.current_thread() and not thread.daemon:
+            thread.join()
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
