@@ -2,8 +2,8 @@
 
 Target (2 CPU cores, idle): <= 2.5 s wall. Runs the command N times in new processes with FACEGEN_PROFILE=1 and
 prints the median / min / max wall time and the median of each stage (start-up = process start to `animate()`:
-Python, click, numpy; the torch import is in model_load; exit = what no stage accounts for: the interpreter's
-teardown, if any). With `--before TREE` (e.g. a git worktree of main) the same command runs from that source tree
+Python, click, numpy, and torch where it is imported at start; the profile's stages; exit = from the profile's
+report at exit to the parent seeing the process end: the interpreter's teardown, if any; other = the rest). With `--before TREE` (e.g. a git worktree of main) the same command runs from that source tree
 too, the two in turn (A B A B ...), and each pair's ratio is printed: on a shared machine, quote ratios and medians.
 
     python benchmarks/bench_start.py [--runs 5] [--before /path/to/main] [--seconds 5]
@@ -38,15 +38,16 @@ def run_once(tree: Path, wav: Path, txt: Path, out: Path) -> dict:
     profile = next(json.loads(line) for line in reversed(proc.stderr.splitlines())
                    if line.startswith('{"facegen_profile"'))
     stages = {"start-up": profile["marks"]["animate_start"] - start, **profile["facegen_profile"]}
-    stages["exit"] = wall - sum(stages.values())
+    stages["exit"] = start + wall - profile["exit"]
+    stages["other"] = wall - sum(stages.values())
     said = [line for line in proc.stderr.splitlines() if not line.startswith("{")]
     return {"wall": wall, "stages": stages, "heavy": profile.get("heavy_modules", []), "said": said}
 
 
 def summary(name: str, runs: list[dict]) -> list[str]:
     walls = [r["wall"] for r in runs]
-    lines = [f"{name}: wall median {statistics.median(walls):.2f} s, min {min(walls):.2f}, max {max(walls):.2f} "
-             f"({len(runs)} runs)"]
+    head = f"{name}: wall median {statistics.median(walls):.2f} s, min {min(walls):.2f}, max {max(walls):.2f}"
+    lines = [f"{head} ({len(runs)} runs)"]
     names = list(dict.fromkeys(k for r in runs for k in r["stages"]))
     lines.append("  stages (median s): " + ", ".join(
         f"{k} {statistics.median(r['stages'].get(k, 0.0) for r in runs):.3f}" for k in names))

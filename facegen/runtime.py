@@ -112,9 +112,10 @@ def select_device(device: str = "auto"):
     """The torch device for `device`: "cpu", "cuda" (or "cuda:N") or "auto" (cuda when torch sees a GPU).
 
     "auto" without a GPU quietly runs on the CPU (the normal case); an explicit "cuda" without one is a
-    FacegenError (the CLI exits 2).
+    FacegenError (the CLI exits 2). The first call imports torch (about a second): profiled as "torch_import".
     """
-    import torch
+    with PROFILE.stage("torch_import"):
+        import torch
 
     name = str(device).strip().lower()
     if name not in DEVICES and not name.startswith("cuda:"):
