@@ -117,7 +117,7 @@ def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text
     """
     if not isinstance(bundle, Bundle):
         bundle = load_bundle(bundle)
-    dev = select_device(device, warn)
+    dev = select_device(device)
     pending: list[Job] = []
 
     def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object]]:

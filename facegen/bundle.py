@@ -17,14 +17,18 @@ import os
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
-from facegen.model import FaceModel, ModelConfig
+
+if TYPE_CHECKING:  # torch is imported by what loads or saves weights: `facegen info` reads metadata without it
+    import torch
+
+    from facegen.model import FaceModel, ModelConfig
 
 FORMAT_VERSION = 1
 DEFAULT_BUNDLE = "default.safetensors"
@@ -88,6 +92,8 @@ INT8_MIN_SIZE = 1 << 20
 
 
 def _compress(name: str, v: torch.Tensor, precision: str) -> dict[str, torch.Tensor]:
+    import torch
+
     if precision == "fp32" or not v.is_floating_point():
         return {name: v}
     if precision == "int8" and v.ndim == 2 and v.numel() >= INT8_MIN_SIZE:
@@ -112,6 +118,7 @@ def _decompress(tensors: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
 
 def save_bundle(bundle: Bundle, path: str | os.PathLike, precision: str = "fp32") -> None:
     """Write the bundle atomically with weights in `precision` (fp32, fp16 or int8, see above)."""
+    import torch
     from safetensors.torch import save_file
 
     from facegen.atomic import atomic_path
@@ -144,7 +151,7 @@ def read_metadata(path: str | os.PathLike) -> dict:
     if not path.is_file():
         raise FacegenError(f"model bundle {path} does not exist: pass --model PATH to a .safetensors bundle")
     try:
-        with safe_open(str(path), framework="pt") as f:
+        with safe_open(str(path), framework="numpy") as f:
             raw = (f.metadata() or {}).get("facegen")
     except Exception as exc:  # safetensors raises its own error types for corrupt headers
         raise FacegenError(
@@ -166,7 +173,10 @@ def read_metadata(path: str | os.PathLike) -> dict:
 
 def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
     """Load a bundle (the built-in default model when `path` is None)."""
+    import torch
     from safetensors.torch import load_file
+
+    from facegen.model import FaceModel, ModelConfig
 
     if path is None:
         path = default_bundle_path()

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -44,7 +43,7 @@ from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
 from facegen.lipsync import pool_lipsync
-from facegen.runtime import Say, say_stderr, select_device, silent, warn_stderr
+from facegen.runtime import Say, progress_bar, select_device, warn_stderr
 
 if TYPE_CHECKING:
     from facegen.bundle import Bundle
@@ -176,9 +175,8 @@ def prepare(
     from facegen.bundle import load_bundle
 
     check_split(split)
-    say = silent if quiet else say_stderr
     bundle = load_bundle(bundle_path)
-    dev = select_device(device, say, task="evaluation")
+    dev = select_device(device)
     if splits is None:
         known = bundle.provenance.get("split")
         splits = Splits.from_dict(known) if known else Splits(train_subjects=tuple(bundle.speakers),
@@ -232,8 +230,6 @@ def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike
     with the bundle's speakers as training subjects. Returns a JSON-ready dict: bundle, data, split,
     conditioning, metrics (pooled), units, per_sequence rows, skipped sequences.
     """
-    from tqdm import tqdm
-
     run = prepare(bundle_path, data_root, split, **options)
     quiet = options.get("quiet", False)
     bundle, dataset, items = run.bundle, run.dataset, run.items
@@ -242,7 +238,7 @@ def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike
     per_sequence: list[dict] = []
     lip_rows: list[dict] = []
     geometry = _lipsync_geometry(bundle)
-    bar = tqdm(items, desc=f"evaluate {split}", unit="seq", disable=quiet, file=sys.stderr, leave=False)
+    bar = progress_bar(items, desc=f"evaluate {split}", unit="seq", enabled=not quiet, leave=False)
     for item in bar:
         conditions = run.conditions(item)
         gt = item.vertices().reshape(item.num_frames, num_vertices, 3)

@@ -209,22 +209,19 @@ def animate(
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
     recognition; `no_text=True` feeds zero text features instead. `bundle` is a loaded Bundle or a path
     (None: the built-in default model). `device` is "auto" (a CUDA GPU when torch sees one, else the
-    CPU, noted through `progress`), "cpu" or "cuda" (a FacegenError without a GPU).
+    CPU), "cpu" or "cuda" (a FacegenError without a GPU).
     With `stream=True` the Animation's vertices are a FrameStream, computed block by block as a writer
     reads them (bounded memory for long clips); otherwise a [T, V, 3] float32 array.
     `progress` receives stage messages for long clips (>= 20 s), `warn` receives notes the user should
     always see.
     """
     PROFILE.mark("animate_start")
-    notes: list[str] = []
-    dev = select_device(device, notes.append)  # an unusable explicit device fails before any work
+    dev = select_device(device)  # an unusable explicit device fails before any work
     if not isinstance(bundle, Bundle):
         with PROFILE.stage("model_load"):
             bundle = load_bundle(bundle)
     clip = prepare_clip(audio, bundle=bundle, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                         template=template, text_model=text_model, progress=progress, warn=warn)
-    for note in notes:  # "auto" fell back to the CPU: said once the inputs are known to be good
-        progress(note)
     with PROFILE.stage("inference"):
         frames = predict_frames(bundle, clip.mel, clip.text_features, clip.speaker,
                                 template=clip.mesh.vertices, device=dev, phones=clip.phones)

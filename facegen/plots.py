@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -39,7 +38,7 @@ from facegen.datasets.biwi import Item
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
-from facegen.runtime import say_stderr, silent
+from facegen.runtime import progress_bar, say_stderr, silent
 
 if TYPE_CHECKING:
     from facegen.evaluate import Run
@@ -151,10 +150,8 @@ class Predictions:
 
 def predict_split(run: Run, quiet: bool = True) -> Predictions:
     """Offsets, encoder outputs and upper-face activation of every sequence of a facegen.evaluate.Run."""
-    from tqdm import tqdm
-
     out = Predictions(items=list(run.items))
-    for item in tqdm(run.items, desc="plots", unit="seq", disable=quiet, file=sys.stderr, leave=False):
+    for item in progress_bar(run.items, desc="plots", unit="seq", enabled=not quiet, leave=False):
         offsets, enc = run.predict(item, run.conditions(item)[0], encoders=True)
         out.offsets.append(offsets.astype(np.float32, copy=False))
         for k, v in enc.items():

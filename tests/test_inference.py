@@ -183,13 +183,11 @@ def test_long_clip_streams_in_bounded_memory(tmp_path):
 
 
 def test_device_selection_and_fallback():
-    notes = []
     if torch.cuda.is_available():
-        assert select_device("auto", notes.append).type == "cuda"
+        assert select_device("auto").type == "cuda"
         return
-    assert select_device("auto", notes.append).type == "cpu"
-    assert notes == ["no CUDA GPU available: running inference on the CPU"]
-    assert select_device("cpu", notes.append).type == "cpu" and len(notes) == 1
+    assert select_device("auto").type == "cpu"  # quietly (tests/test_fast_start.py: animate says nothing of it)
+    assert select_device("cpu").type == "cpu"
     with pytest.raises(FacegenError, match="no CUDA GPU"):
         select_device("cuda")
     with pytest.raises(FacegenError, match="unknown device"):

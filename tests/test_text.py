@@ -1,4 +1,5 @@
-"""Text features: LM backends (tiny GPT-2 with the real BPE, packaged MiniLM), frame layout, smoothing."""
+"""Text features: LM backends (tiny GPT-2 with the real BPE, packaged MiniLM in plain torch checked against
+transformers), frame layout, smoothing."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from transformers import AutoTokenizer
 
 from facegen.errors import FacegenError
 from facegen.text import (
+    _minilm_folder,
     frame_features,
     load_text_backend,
     smooth_frames,
@@ -56,11 +58,22 @@ def naive_smooth(x: np.ndarray, before: int = 8, after: int = 7) -> np.ndarray:
 # ---------------------------------------------------------------- GPT-2 path (tiny random weights)
 
 
+def ids(backend, text: str) -> list[int]:
+    return backend.tokenize(text).ids.tolist()
+
+
+def hidden(backend, token_ids) -> np.ndarray:
+    with torch.inference_mode():
+        return backend.forward(torch.tensor([token_ids]))[0].numpy()
+
+
 def test_tiny_gpt2_has_real_gpt2_tokenizer(gpt2_dir, gpt2):
     tok = AutoTokenizer.from_pretrained(gpt2_dir, local_files_only=True)
     assert tok("hello world")["input_ids"] == [31373, 995]
-    assert gpt2.tokenizer("hello world")["input_ids"] == [31373, 995]
-    assert gpt2.tokenizer(" world")["input_ids"] == [995]  # leading-space convention ("Ġworld")
+    assert ids(gpt2, "hello world") == [31373, 995]
+    assert ids(gpt2, " world") == [995]  # leading-space convention ("Ġworld")
+    tokens = gpt2.tokenize("hello world")
+    assert tokens.offsets.tolist() == [[0, 5], [5, 11]] and not tokens.special.any()
 
 
 def test_gpt2_backend_dims_and_id(gpt2):
@@ -77,12 +90,11 @@ def test_gpt2_pools_the_mean_of_each_words_tokens(gpt2):
 
     # Reference: GPT-2 BPE of the sentence = concatenation of each word with a leading space
     # (except the first); run the model once and average each word's token states.
-    groups = [gpt2.tokenizer(w if i == 0 else " " + w)["input_ids"] for i, w in enumerate(words)]
+    groups = [ids(gpt2, w if i == 0 else " " + w) for i, w in enumerate(words)]
     assert [len(g) for g in groups][:3] == [2, 2, len(groups[2])] and len(groups[2]) > 2
-    ids = [i for g in groups for i in g]
-    assert gpt2.tokenizer(" ".join(words))["input_ids"] == ids
-    with torch.inference_mode():
-        states = gpt2.model(input_ids=torch.tensor([ids])).last_hidden_state[0].numpy()
+    joined = [i for g in groups for i in g]
+    assert ids(gpt2, " ".join(words)) == joined
+    states = hidden(gpt2, joined)
     bounds = np.cumsum([0] + [len(g) for g in groups])
     expected = np.stack([states[a:b].mean(axis=0) for a, b in itertools.pairwise(bounds)])
     np.testing.assert_allclose(vecs, expected, atol=1e-5)
@@ -101,7 +113,7 @@ def test_gpt2_long_text_is_windowed(tmp_path):
     backend = load_text_backend("gpt2", folder)
     assert backend.max_tokens == 16
     words = ("the cat sat on the mat and the dog ran in the park " * 10).split()  # 130 one-token words
-    assert len(backend.tokenizer(" ".join(words))["input_ids"]) == 130
+    assert len(ids(backend, " ".join(words))) == 130
     vecs = backend.word_vectors(words)
     assert vecs.shape == (130, 32) and np.isfinite(vecs).all()
     assert (np.abs(vecs).sum(axis=1) > 0).all()
@@ -110,12 +122,10 @@ def test_gpt2_long_text_is_windowed(tmp_path):
     np.testing.assert_allclose(vecs[:8], backend.word_vectors(words[:8]), atol=1e-5)
     # windows of 16 tokens start every 8 tokens; each token keeps the state from the window where it
     # is farthest from an edge: token 12 from window 8..23 (4 from its start), token 60 from 56..71
-    ids = backend.tokenizer(" ".join(words))["input_ids"]
-    with torch.inference_mode():
-        for token, start in ((12, 8), (60, 56)):
-            window = torch.tensor([ids[start : start + 16]])
-            state = backend.model(input_ids=window).last_hidden_state[0, token - start].numpy()
-            np.testing.assert_allclose(vecs[token], state, atol=1e-5)
+    all_ids = ids(backend, " ".join(words))
+    for token, start in ((12, 8), (60, 56)):
+        state = hidden(backend, all_ids[start : start + 16])[token - start]
+        np.testing.assert_allclose(vecs[token], state, atol=1e-5)
     # later tokens come from later windows with shifted positions: they differ from any 16-token run
     assert np.abs(vecs[60] - vecs[8]).max() > 1e-4
 
@@ -140,12 +150,83 @@ def test_minilm_vectors(minilm):
     # token states, not one pooled sentence embedding: the words differ
     assert np.abs(vecs[0] - vecs[1]).max() > 1e-2
     # "Unbelievable!" is [unbelievable] [!]: its vector is the mean of two token states, not either one
-    enc = minilm.tokenizer(" ".join(words))
-    assert minilm.tokenizer.convert_ids_to_tokens(enc["input_ids"])[5:7] == ["unbelievable", "!"]
-    with torch.inference_mode():
-        states = minilm.model(input_ids=torch.tensor([enc["input_ids"]])).last_hidden_state[0].numpy()
+    tokens = minilm.tokenize(" ".join(words))
+    assert [minilm.tokenize.tokenizer.id_to_token(i) for i in tokens.ids[5:7]] == ["unbelievable", "!"]
+    assert tokens.special.tolist() == [True] + [False] * 7 + [True]  # [CLS] hello , world . unbelievable ! ok [SEP]
+    states = hidden(minilm, tokens.ids.tolist())
     np.testing.assert_allclose(vecs[2], states[5:7].mean(axis=0), atol=1e-5)
     np.testing.assert_allclose(vecs[0], states[1:3].mean(axis=0), atol=1e-5)
+
+
+SENTENCES = [
+    "Hello, world. Unbelievable!",
+    "We were amazed to find the old bakery still open on a quiet Sunday morning.",
+    "Café naïve résumé: état 1984 — 3.5 km/h, it's J.R.R. Tolkien's!",
+    "a",
+    "the river bank flooded " * 40,  # 161 tokens: past the 128 the tokenizer.json truncates and pads to
+]
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """transformers' own tokenizer and BertModel on the packaged files: the reference for facegen.minilm."""
+    from transformers import AutoModel
+
+    folder = _minilm_folder()
+    return AutoTokenizer.from_pretrained(folder, local_files_only=True), AutoModel.from_pretrained(
+        folder, local_files_only=True, dtype=torch.float32).eval()
+
+
+@pytest.mark.parametrize("sentence", SENTENCES)
+def test_minilm_equals_transformers(minilm, reference, sentence):
+    tokenizer, model = reference
+    ref = tokenizer(sentence, return_offsets_mapping=True, return_special_tokens_mask=True)
+    tokens = minilm.tokenize(sentence)
+    assert tokens.ids.tolist() == ref["input_ids"]
+    assert tokens.offsets.tolist() == [list(o) for o in ref["offset_mapping"]]
+    assert tokens.special.tolist() == [bool(m) for m in ref["special_tokens_mask"]]
+    with torch.inference_mode():
+        expected = model(input_ids=torch.tensor([ref["input_ids"]])).last_hidden_state[0].numpy()
+    states = hidden(minilm, ref["input_ids"])
+    assert states.shape == expected.shape == (len(ref["input_ids"]), 384)
+    np.testing.assert_allclose(states, expected, atol=1e-5, rtol=0)
+    assert np.abs(expected).max() > 0.1  # real states, not zeros
+
+
+def test_minilm_word_vectors_equal_the_transformers_backend(minilm):
+    """The same folder loaded as a plain model folder goes through transformers' AutoModel."""
+    from facegen.minilm import MiniLM
+
+    through_transformers = load_text_backend(_minilm_folder())
+    assert isinstance(minilm.forward, MiniLM) and not isinstance(through_transformers.forward, MiniLM)
+    assert through_transformers.dim == 384 and through_transformers.max_tokens == minilm.max_tokens == 512
+    words = ["The", "quick", "brown", "fox,", "amazed,", "jumped", "over", "3", "lazy", "dogs'", "résumés!"] * 3
+    np.testing.assert_allclose(minilm.word_vectors(words), through_transformers.word_vectors(words), atol=1e-5)
+
+
+def test_minilm_loads_without_transformers():
+    import subprocess
+    import sys
+
+    code = ("import sys; from facegen.text import load_text_backend; b = load_text_backend('minilm'); "
+            "v = b.word_vectors(['hello', 'world']); "
+            "print(v.shape, sorted(m for m in ('transformers', 'scipy') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "(2, 384) []"
+
+
+def test_minilm_missing_or_broken_files_are_one_line(tmp_path):
+    import shutil
+
+    from facegen.minilm import load_minilm
+
+    with pytest.raises(FacegenError, match="tokenizer.json are missing from .*--text-model PATH"):
+        load_minilm(tmp_path)
+    for name in ("config.json", "tokenizer.json"):
+        shutil.copy(f"{_minilm_folder()}/{name}", tmp_path / name)
+    (tmp_path / "model.safetensors").write_bytes(b"\x00" * 64)
+    with pytest.raises(FacegenError, match="cannot read the MiniLM files in .*--text-model PATH"):
+        load_minilm(tmp_path)
 
 
 def test_minilm_contextual_and_cached(minilm):

@@ -139,13 +139,12 @@ def test_bad_setups_are_refused(toy, tmp_path):
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
 def test_device_choice_without_cuda(toy, tmp_path):
-    said: list[str] = []
-    assert select_device("auto", said.append, task="training") == torch.device("cpu") and "CPU" in said[0]
-    assert select_device("cpu", said.append, task="training") == torch.device("cpu")
+    assert select_device("auto") == torch.device("cpu")  # quietly: the CPU is the normal case
+    assert select_device("cpu") == torch.device("cpu")
     with pytest.raises(FacegenError, match="no CUDA GPU"):
         train_toy(toy, tmp_path / "c.safetensors", device="cuda")
     with pytest.raises(FacegenError, match="unknown device"):
-        select_device("tpu", said.append, task="training")
+        select_device("tpu")
 
 
 def test_pca_output_layer_trains_in_coefficients_and_folds_into_the_papers_layer(toy, tmp_path):

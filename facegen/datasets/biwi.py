@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sys
 from collections.abc import Callable, Iterable
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
@@ -56,7 +55,7 @@ from facegen.datasets.splits import Splits
 from facegen.datasets.templates import as_vertices, read_templates_pkl, write_templates_pkl
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh, read_mesh, read_region, write_mesh, write_region
-from facegen.runtime import Say, silent, warn_stderr
+from facegen.runtime import Say, progress_bar, silent, warn_stderr
 
 REGION_FILES = {"lve": "lips", "fdd": "upper_face"}  # community file stem → region name in bundles
 ALIGNMENT_SUFFIXES = (".json", ".textgrid", ".csv")
@@ -367,12 +366,10 @@ class Dataset:
     def load(self, sequences: SequenceABC[Sequence], features: FeatureConfig, filters: np.ndarray,
              backend=None, progress: bool = False) -> list[Item]:
         """Features of every usable sequence (from the cache when it has them); bad ones reported."""
-        from tqdm import tqdm
-
         cache = FeatureCache(self.cache_dir, features, filters, backend)
         items = []
-        bar = tqdm(sequences, desc="features", unit="seq", disable=not progress or not sequences,
-                   file=sys.stderr, leave=False)
+        bar = progress_bar(sequences, desc="features", unit="seq", enabled=progress and bool(sequences),
+                           leave=False)
         try:
             for seq in bar:
                 item = self._load_one(seq, cache)

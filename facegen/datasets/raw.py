@@ -8,7 +8,6 @@ import os
 import re
 import shutil
 import subprocess
-import sys
 import tarfile
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -21,7 +20,7 @@ from facegen.datasets.biwi import REGION_FILES, DatasetWriter
 from facegen.datasets.splits import parse_subjects, sequence_name
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh, read_mesh, read_region, surface_area, unit_area
-from facegen.runtime import Say, silent, warn_stderr
+from facegen.runtime import Say, progress_bar, silent, warn_stderr
 
 ROTATE_X_PI = np.array([[1.0, 0.0, 0.0],  # the community's rotx for theta = pi (applied as V @ rotx)
                         [0.0, np.cos(np.pi), -np.sin(np.pi)],
@@ -285,8 +284,6 @@ def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np
                   region_idx: dict, normalisation: str, sentences_text: dict, sample_rate: int, progress: bool,
                   warn: Say) -> ImportReport:
     """The writing half of import_biwi (its inputs checked)."""
-    from tqdm import tqdm
-
     first = next(iter(meshes.values()))
     writer = DatasetWriter(out)
     report = ImportReport(out=out, subjects=sorted(meshes))
@@ -319,7 +316,7 @@ def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np
             entries.sort(key=lambda e: 0 if e.is_dir() else 1 if e.suffix.lower() == ".tar" else 2)
             takes.append((subject, number, entries))
 
-    bar = tqdm(takes, desc="import", unit="seq", disable=not progress, file=sys.stderr)
+    bar = progress_bar(takes, desc="import", unit="seq", enabled=progress)
     for subject, number, entries in bar:
         name = sequence_name(subject, number)
         try:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import tempfile
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -23,6 +22,7 @@ import numpy as np
 from facegen.atomic import check_writable
 from facegen.audio import write_wav
 from facegen.errors import FacegenError
+from facegen.runtime import progress_bar
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
 FRAME_WINDOW = 4  # frames rendered ahead of the encoder
@@ -62,8 +62,6 @@ def encode(
     progress: bool,
 ) -> None:
     """Pipe `count` rgb24 frames (an iterator of arrays) to ffmpeg and mux the audio; write `path`."""
-    from tqdm import tqdm
-
     with tempfile.TemporaryDirectory(prefix="facegen-render-") as tmp:
         cmd = [
             _ffmpeg(),
@@ -116,9 +114,7 @@ def encode(
         # ffmpeg's messages go to a file, not a pipe, so it can never block on them
         with (
             open(Path(tmp) / "ffmpeg.log", "w+b") as log,
-            tqdm(
-                total=count, unit="frame", desc="render", disable=not progress, file=sys.stderr, leave=False
-            ) as bar,
+            progress_bar(total=count, unit="frame", desc="render", enabled=progress, leave=False) as bar,
         ):
             # own session: a terminal's Ctrl-C reaches only us; we stop ffmpeg ourselves
             proc = subprocess.Popen(

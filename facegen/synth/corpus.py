@@ -56,6 +56,7 @@ import numpy as np
 from facegen.atomic import atomic_path
 from facegen.datasets.splits import parse_numbers, parse_subjects, sequence_name
 from facegen.errors import FacegenError
+from facegen.runtime import progress_bar
 from facegen.synth.sentences import SENTENCES
 
 CORPUS_VERSION = 1  # bump when the face, rig, voices or sentences change what is generated
@@ -300,11 +301,9 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
          manifest: dict, report: CorpusReport) -> None:
     """Generate `todo` with one fresh worker process per speaker (`workers` at a time); record each
     finished sequence in the manifest as the worker reports it."""
-    from tqdm import tqdm
-
     total = sum(len(v) for v in todo.values())
     order = sorted(todo, key=lambda s: -len(todo[s]))  # longest jobs first
-    bar = tqdm(total=total, desc="synth", unit="seq", disable=not progress, file=sys.stderr)
+    bar = progress_bar(total=total, desc="synth", unit="seq", enabled=progress)
     lock = threading.Lock()
     procs: list[subprocess.Popen] = []
     stopping = threading.Event()

