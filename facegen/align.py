@@ -3,6 +3,11 @@
 What the recogniser hears comes from `facegen.words.normalize_transcript` (lower case, numbers spelled
 out), and every result maps back to the user's words. Words missing from pocketsphinx's dictionary get a
 pronunciation from libespeak-ng (`facegen.espeak.pronounce`).
+
+Long audio is aligned piece by piece, cut at pauses (`facegen.align_pieces`): each pass costs time that
+grows with the length times the words in reach, and a piece that fails is retried alone with wide beams.
+Every pass hears the same features as one pass over the whole clip would (the clip's cepstral mean, a
+fresh noise estimate): results never depend on earlier calls, and little on where the pieces are cut.
 """
 
 from __future__ import annotations
