@@ -3,23 +3,37 @@
 What the recogniser hears comes from `facegen.words.normalize_transcript` (lower case, numbers spelled
 out), and every result maps back to the user's words. Words missing from pocketsphinx's dictionary get a
 pronunciation from libespeak-ng (`facegen.espeak.pronounce`).
+
+Long audio is aligned piece by piece, cut at pauses (`facegen.align_pieces`): each pass costs time that
+grows with the length times the words in reach, and a piece that fails is retried alone with wide beams.
+Every pass hears the same features as one pass over the whole clip would (the clip's cepstral mean, a
+fresh noise estimate): results never depend on earlier calls, and little on where the pieces are cut.
 """
 
 from __future__ import annotations
 
-import itertools
 import re
 import threading
 import unicodedata
+import warnings
 
 import numpy as np
 
+from facegen.align_pieces import (
+    HOP,
+    LOOKAHEAD,
+    RATE,
+    loud_frames,
+    pieces,
+    prefix_grammar,
+    scored,
+    word_window,
+)
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import CMU_CONSONANTS, CMU_VOWELS, pronounce
 from facegen.words import Word, check_word_rate, normalize_transcript
 
-RATE = 16000  # pocketsphinx's en-us model
 FRAME = 0.01  # pocketsphinx frame step (s)
 
 _LOCK = threading.RLock()
@@ -29,10 +43,15 @@ _PRONOUNCED: dict[int, set[str]] = {}  # id(decoder) → words whose espeak pron
 # FSG search drops valid alignments. Wide beams rescue noisy speech (the search is constrained by the
 # transcript, so they stay affordable); fillers (noise/breath models) sometimes derail it.
 _WIDE = {"beam": 1e-120, "wbeam": 1e-100, "pbeam": 1e-120, "maxhmmpf": -1}
+# Pieces of a clip are aligned with the whole clip's cepstral mean (as one search over the clip would be):
+# "cmn" finds it (batch mean, the model's default; its one-word search costs little), and the aligning
+# decoders subtract it as given ("live" mode, set before each pass; with full_utt it stays fixed in a pass).
+_ALIGN = {"lm": None, "bestpath": False, "cmn": "live"}
 _CONFIGS = {
-    "align": {"lm": None, "bestpath": False},
-    "align-wide": {"lm": None, "bestpath": False, **_WIDE},
-    "align-nofiller": {"lm": None, "bestpath": False, "fsgusefiller": False, **_WIDE},
+    "align": _ALIGN,
+    "align-wide": {**_ALIGN, **_WIDE},
+    "align-nofiller": {**_ALIGN, "fsgusefiller": False, **_WIDE},
+    "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False},
     "recognize": {},
 }
 _PHONES = CMU_VOWELS + CMU_CONSONANTS
@@ -111,8 +130,15 @@ def _pcm_bytes(audio: np.ndarray) -> bytes:
     return (np.clip(x, -1.0, 1.0) * 32767).astype("<i2").tobytes()
 
 
-def _decode(decoder, pcm: bytes) -> list[tuple[str, int, int]]:
-    """Run one utterance; return its segments (word, first frame, last frame inclusive)."""
+def _decode(decoder, pcm: bytes, cmn: str | None = None) -> list[tuple[str, int, int]]:
+    """Run one utterance (with the cepstral mean `cmn`, if given); return its segments (word, first frame,
+    last frame inclusive). The noise estimate starts afresh, so a result never depends on what the decoder
+    heard before (pocketsphinx keeps it across utterances; start_stream resets it)."""
+    if cmn is not None:
+        decoder.set_cmn(cmn)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # "unnecessary", but the only reset there is
+        decoder.start_stream()
     decoder.start_utt()
     decoder.process_raw(pcm, no_search=False, full_utt=True)
     decoder.end_utt()
@@ -127,106 +153,43 @@ def _is_filler(word: str) -> bool:
     return word.startswith(("<", "[", "+"))  # <s> </s> <sil> [NOISE] +SPN+ ...
 
 
-def _state_gaps(decoder, pcm: bytes, n_frames: int) -> np.ndarray:
-    """Per frame: how far the current alignment's HMM state scores below the best state of that frame.
-
-    Runs pocketsphinx's second, state-level alignment pass over the current word alignment.
-    """
-    decoder.set_alignment()
+def _clip_cmn(pcm: bytes) -> str:
+    """The cepstral mean of the whole clip (pocketsphinx's batch mean, as a string for set_cmn)."""
+    decoder = _decoder("cmn")
+    decoder.set_align_text("a")
     _decode(decoder, pcm)
+    return decoder.get_cmn()
+
+
+def _state_pass(decoder, pcm: bytes, cmn: str):
+    """pocketsphinx's second, state-level alignment pass over the word alignment it has just found."""
+    decoder.set_alignment()
+    _decode(decoder, pcm, cmn)
+    alignment = decoder.get_alignment()
+    if alignment is None:
+        raise _mismatch("pocketsphinx found no phone alignment for its words")
+    return alignment
+
+
+def _state_gaps(alignment, n_frames: int) -> np.ndarray:
+    """Per frame: how far the alignment's HMM state scores below the best state of that frame."""
     gaps = np.zeros(n_frames)
-    for phone in decoder.get_alignment().phones():
+    for phone in alignment.phones():
         if phone.duration > 0:
             gaps[phone.start:phone.start + phone.duration] = -phone.score / phone.duration
     return gaps
 
 
-def _free_gaps(decoder, pcm: bytes, n_frames: int) -> np.ndarray | None:
+def _free_gaps(decoder, pcm: bytes, n_frames: int, cmn: str) -> np.ndarray | None:
     """State gaps of the best unconstrained phone sequence: the fit a matching transcript nearly reaches."""
     decoder.activate_search("_phones")
-    phones = [_PHONE_WORD[w] for w, _, _ in _decode(decoder, pcm) if w in _PHONE_WORD]
+    phones = [_PHONE_WORD[w] for w, _, _ in _decode(decoder, pcm, cmn) if w in _PHONE_WORD]
     if not phones:
         return None
     decoder.set_align_text(" ".join(phones))
-    if not _decode(decoder, pcm):
+    if not _decode(decoder, pcm, cmn):
         return None
-    return _state_gaps(decoder, pcm, n_frames)
-
-
-def _match_scores(decoder, pcm: bytes, n_frames: int,
-                  words: list[tuple[str, int, int]]) -> tuple[np.ndarray, np.ndarray | None]:
-    """State gaps of the word alignment and of the free phone loop, for _check_match.
-
-    Both passes cost time and memory that grow faster than the audio's length (3 minutes in one pass:
-    90 s and 1.3 GB; 10 minutes: more than 6 GB), so audio longer than CHECK_SECONDS is scored in
-    segments of at most that length, cut in the longest pause between aligned words; each segment is
-    aligned again with its own words and scored alone. At most CHECK_SEGMENTS segments, spread evenly
-    over the clip, are scored (the frames of the others are NaN: their words are left out of the
-    median); the share of speech outside the words is still measured on the whole clip. Falls back to
-    one pass when a segment does not realign.
-    """
-    segments = _segments(words, n_frames)
-    if len(segments) == 1:
-        return _state_gaps(decoder, pcm, n_frames), _free_gaps(decoder, pcm, n_frames)
-    gaps, free = np.full(n_frames, np.nan), np.full(n_frames, np.nan)
-    chosen = np.unique(np.linspace(0, len(segments) - 1, min(CHECK_SEGMENTS, len(segments))).round().astype(int))
-    for first, last, keys in (segments[i] for i in chosen):  # frames first..last-1
-        part = pcm[first * _FRAME_BYTES:last * _FRAME_BYTES]
-        decoder.set_align_text(" ".join(keys))
-        if [_base(w) for w, _, _ in _decode(decoder, part) if not _is_filler(w)] != keys:
-            decoder.set_align_text(" ".join(_base(w) for w, _, _ in words))
-            _decode(decoder, pcm)
-            return _state_gaps(decoder, pcm, n_frames), _free_gaps(decoder, pcm, n_frames)
-        n = min(decoder.n_frames(), last - first)
-        gaps[first:first + n] = _state_gaps(decoder, part, decoder.n_frames())[:n]
-        seg_free = _free_gaps(decoder, part, decoder.n_frames())
-        free[first:first + n] = gaps[first:first + n] if seg_free is None else seg_free[:n]
-    return gaps, free
-
-
-CHECK_SECONDS = 30.0  # longest stretch of audio scored in one pass by _match_scores
-CHECK_SEGMENTS = 8  # most segments scored (4 minutes of audio at most)
-_FRAME_BYTES = int(RATE * FRAME) * 2  # 16-bit PCM bytes per pocketsphinx frame
-
-
-def _segments(words: list[tuple[str, int, int]], n_frames: int) -> list[tuple[int, int, list[str]]]:
-    """(first frame, end frame, dictionary words) of segments of at most CHECK_SECONDS, cut in the middle
-    of the longest pause between consecutive words in each segment's second half (one segment when the
-    audio is short or no pause can be found)."""
-    limit = int(CHECK_SECONDS / FRAME)
-    if n_frames <= limit:
-        return [(0, n_frames, [_base(w) for w, _, _ in words])]
-    cuts, start, i = [0], 0, 0
-    while n_frames - start > limit:
-        best = None
-        for j in range(i, len(words) - 1):
-            end, following = words[j][2] + 1, words[j + 1][1]
-            if following - start > limit:
-                break
-            if end - start >= limit // 2 and (best is None or following - end > best[0]):
-                best = (following - end, (end + following) // 2, j + 1)
-        if best is None:
-            break
-        start, i = best[1], best[2]
-        cuts.append(start)
-    cuts.append(n_frames)
-    segments = []
-    for a, b in itertools.pairwise(cuts):
-        keys = [_base(w) for w, first, _ in words if a <= first < b]
-        segments.append((a, b, keys))
-    if any(not keys for _, _, keys in segments):
-        return [(0, n_frames, [_base(w) for w, _, _ in words])]
-    return segments
-
-
-def _loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
-    """Frames (10 ms step, 25 ms window) clearly louder than the recording's noise floor."""
-    hop, win = RATE // 100, int(0.025 * RATE)
-    padded = np.pad(audio, (0, max(0, n_frames * hop + win - len(audio))))
-    frames = np.lib.stride_tricks.sliding_window_view(padded, win)[::hop][:n_frames]
-    energy = 10 * np.log10(np.mean(frames.astype(np.float64) ** 2, axis=1) + 1e-12)
-    low, high = np.percentile(energy, 10), np.percentile(energy, 95)
-    return energy > low + 0.5 * (high - low)
+    return _state_gaps(_state_pass(decoder, pcm, cmn), n_frames)
 
 
 def _mismatch(detail: str) -> FacegenError:
@@ -235,8 +198,7 @@ def _mismatch(detail: str) -> FacegenError:
                         "language (e.g. the Montreal Forced Aligner) and pass --alignment FILE")
 
 
-def _check_match(audio: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray,
-                 free: np.ndarray | None) -> None:
+def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray, free: np.ndarray) -> None:
     """Raise if the alignment shows that the transcript is not what was said.
 
     Two signs, measured on synthetic speech (12 sentences and a paragraph, 14 voices, clean, 10 and
@@ -248,17 +210,17 @@ def _check_match(audio: np.ndarray, words: list[tuple[str, int, int]], gaps: np.
       for the right one (13 at most down to 10 dB SNR). A typo or a swapped word passes, as it should.
     End to end on those 48 clips: every matching transcript passes; 46/48 wrong sentences and 47/48
     half transcripts are refused (the misses are at 10 and 5 dB SNR).
+    `gaps` and `free` are NaN outside the pieces scored (align_pieces.scored): their words are left out.
     """
-    n = len(gaps)
-    loud = _loud_frames(audio, n)
-    in_words = np.zeros(n, bool)
+    in_words = np.zeros(len(loud), bool)
     for _, first, last in words:
         in_words[first:last + 1] = True
     unexplained = float(np.sum(loud & ~in_words)) / max(int(np.sum(loud)), 1)
     if unexplained > MAX_UNEXPLAINED:
         raise _mismatch(f"{unexplained:.0%} of the speech lies outside its words")
-    if free is not None:  # words in unscored segments of long audio are NaN and left out
-        excess = float(np.nanmedian([gaps[f:l + 1].mean() - free[f:l + 1].mean() for _, f, l in words]))
+    excess = [gaps[f:l + 1].mean() - free[f:l + 1].mean() for _, f, l in words]
+    if not np.all(np.isnan(excess)):
+        excess = float(np.nanmedian(excess))
         if excess > MAX_WORD_GAP:
             raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {MAX_WORD_GAP:.0f}")
 
@@ -292,22 +254,50 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
     pcm = _pcm_bytes(audio)
     spoken = [(i, token) for i, (_, tokens) in enumerate(entries) for token in tokens]
     duration = len(audio) / RATE
+    n_frames = len(audio) // HOP
+    loud = loud_frames(audio, n_frames)
+    spans = pieces(loud)
+    chosen = scored(spans)
+    words: list[tuple[str, int, int]] = []
     phones: list[Phone] = []
+    gaps, free = np.full(n_frames, np.nan), np.full(n_frames, np.nan)
     with _LOCK:
-        for kind in ("align", "align-wide", "align-nofiller"):
-            decoder = _decoder(kind)
-            keys = [_dictionary_word(decoder, token) for _, token in spoken]
-            decoder.set_align_text(" ".join(keys))
-            words = [s for s in _decode(decoder, pcm) if not _is_filler(s[0])]
-            if [_base(w) for w, _, _ in words] == keys:
-                break
-        else:
-            raise _mismatch("no alignment of its words to the audio exists")
-        n_frames = decoder.n_frames()
-        if with_phones:
-            phones = _phone_pass(decoder, pcm, duration)
-        gaps, free = _match_scores(decoder, pcm, n_frames, words)
-    _check_match(audio, words, gaps, free)
+        cmn = _clip_cmn(pcm)
+        start, p = 0, 0
+        while p < len(spans) and len(words) < len(spoken):
+            last = p == len(spans) - 1
+            cut = spans[p][1]
+            stop = n_frames if last else min(n_frames, cut + LOOKAHEAD)
+            part = pcm[start * HOP * 2:stop * HOP * 2]
+            found = _align_piece(part, [t for _, t in spoken[len(words):]], stop - start, n_frames - start,
+                                 cmn, prefix=not last)
+            if found is None:
+                if last:
+                    raise _mismatch("no alignment of its words to the audio exists")
+                chosen = {i for i in chosen if i < p} | ({p} if any(i >= p for i in chosen) else set())
+                spans[p:] = [(start, n_frames)]  # a piece whose words cannot be told apart: align the rest at once
+                continue
+            decoder, segments = found
+            kept = segments if last else [s for s in segments if s[1] < cut - start]
+            end = n_frames if last else max(cut, start + (kept[-1][2] + 1 if kept else 0))
+            if kept and (with_phones or p in chosen):
+                if not last:  # the scores of the piece alone: its kept words aligned again without what follows
+                    part = part[:(end - start) * HOP * 2]
+                    decoder.set_align_text(" ".join(w for w, _, _ in kept))
+                    _decode(decoder, part, cmn)
+                n = min(decoder.n_frames(), end - start)
+                alignment = _state_pass(decoder, part, cmn)
+                if with_phones:
+                    phones += _phones(alignment, len(kept), start, duration)
+                if p in chosen:
+                    gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[:n]
+                    piece_free = _free_gaps(decoder, part, decoder.n_frames(), cmn)
+                    free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
+            words += [(w, a + start, b + start) for w, a, b in kept]
+            start, p = end, p + 1
+    if len(words) < len(spoken):
+        raise _mismatch("no alignment of its words to the audio exists")
+    _check_match(loud, words, gaps, free)
     times: dict[int, list[float]] = {}
     for (index, _), (_, first, last) in zip(spoken, words, strict=True):
         start, end = first * FRAME, min((last + 1) * FRAME, duration)
@@ -315,17 +305,49 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
     return [Word(entries[i][0], round(t[0], 3), round(t[1], 3)) for i, t in sorted(times.items())], phones
 
 
-def _phone_pass(decoder, pcm: bytes, duration: float) -> list[Phone]:
-    """The phones of the word alignment the decoder has just found (pocketsphinx: set_alignment, decode)."""
-    decoder.set_alignment()
-    decoder.start_utt()
-    decoder.process_raw(pcm, no_search=False, full_utt=True)
-    decoder.end_utt()
-    alignment = decoder.get_alignment()
-    if alignment is None:
-        raise _mismatch("pocketsphinx found no phone alignment for its words")
-    return [(phone.name, round(phone.start * FRAME, 3), round(min((phone.start + phone.duration) * FRAME, duration), 3))
-            for word in alignment if not _is_filler(word.name) for phone in word if phone.name != "SIL"]
+def _align_piece(pcm: bytes, tokens: list[str], length: int, rest: int, cmn: str,
+                 prefix: bool) -> tuple[object, list[tuple[str, int, int]]] | None:
+    """Align one piece: all of `tokens`, or (`prefix`) as many of the first of them as its speech holds.
+
+    Tries the decoders of _CONFIGS in turn (wide beams only when the first fails; a prefix never without
+    fillers, it would have nothing else for a pause); returns the decoder that aligned it (its search still
+    holds the alignment) and the words (dictionary word, first frame, last frame in the piece), or None.
+    A prefix that takes every word it was offered is offered them all.
+    """
+    offers = [word_window(len(tokens), length, rest), len(tokens)] if prefix else [len(tokens)]
+    for kind in ("align", "align-wide") if prefix else ("align", "align-wide", "align-nofiller"):
+        decoder = _decoder(kind)
+        for offered in offers:
+            keys = [_dictionary_word(decoder, token) for token in tokens[:offered]]
+            if prefix:
+                decoder.add_fsg("_prefix", prefix_grammar(decoder, "_prefix", keys))
+                decoder.activate_search("_prefix")
+            else:
+                decoder.set_align_text(" ".join(keys))
+            words = [s for s in _decode(decoder, pcm, cmn) if not _is_filler(s[0])]
+            said = [_base(w) for w, _, _ in words]
+            if said == keys or (prefix and words and said == keys[:len(said)]):
+                if len(said) < offered or offered == len(tokens):
+                    return decoder, words
+            elif not prefix or not words:
+                break
+    return None
+
+
+def _phones(alignment, count: int, first: int, duration: float) -> list[Phone]:
+    """The phones of the first `count` words of a piece's state alignment (`first`: the piece's first frame).
+    Read while iterating: an entry of pocketsphinx's alignment is only valid while its iterator is."""
+    phones: list[Phone] = []
+    for word in alignment:
+        if count == 0:
+            break
+        if _is_filler(word.name):
+            continue
+        count -= 1
+        phones += [(phone.name, round((first + phone.start) * FRAME, 3),
+                    round(min((first + phone.start + phone.duration) * FRAME, duration), 3))
+                   for phone in word if phone.name != "SIL"]
+    return phones
 
 
 def recognize(audio: np.ndarray, sample_rate: int) -> list[Word]:

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from facegen.align import align, align_phones, recognize
+from facegen.align_pieces import loud_frames, pieces, scored
+from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import Speech, espeak_to_cmu, pronounce, synthesize
 from facegen.words import Word, normalize_transcript, read_alignment, write_alignment
@@ -197,6 +199,58 @@ def test_recognize_returns_timed_words(corpus):
     assert words[0].start >= PAD - 0.1 and words[-1].end <= PAD + speech.duration + PAD
     truth = {w.lower().strip(".") for w in text.split()}
     assert len(truth & {w.text for w in words}) >= 2  # lower quality than alignment, not nothing
+
+
+# ---------------------------------------------------------------------------- long audio, piece by piece
+
+def long_clip(corpus, pause: float = 0.6) -> tuple[np.ndarray, str, list[float]]:
+    """The corpus said twice in a row with pauses (about 40 s): audio, transcript, true word onsets."""
+    rate = corpus[0][1].sample_rate
+    parts, texts, onsets, t = [np.zeros(int(PAD * rate), np.float32)], [], [], PAD
+    for text, speech in corpus + corpus:
+        parts += [speech.audio, np.zeros(int(pause * rate), np.float32)]
+        texts.append(text)
+        onsets += [t + w.start for w in speech.words]
+        t += speech.duration + pause
+    return np.concatenate(parts), " ".join(texts), onsets
+
+
+def test_pieces_are_cut_in_the_middle_of_pauses():
+    loud = np.ones(2000, bool)
+    loud[[*range(300, 340), *range(700, 720), *range(900, 960), *range(1700, 1800)]] = False
+    # 300-340 comes too early (< PIECE_SECONDS), 700-720 is too short, 1700-1800 leaves too little after it
+    assert pieces(loud) == [(0, 930), (930, 2000)]
+    assert pieces(np.ones(5000, bool)) == [(0, 5000)]  # no pause: one piece, as one long search
+    spans = [(i * 600, (i + 1) * 600) for i in range(10)]
+    assert scored(spans) == {0, 9}  # 10 s at least, spread out
+    assert scored(spans[:1]) == {0}
+
+
+def test_long_audio_aligns_piece_by_piece(corpus):
+    audio, text, onsets = long_clip(corpus)
+    rate = corpus[0][1].sample_rate
+    at16k = resample(audio, rate, 16000)
+    assert len(pieces(loud_frames(at16k, len(at16k) // 160))) >= 4
+    words = align(audio, rate, text)
+    assert [w.text for w in words] == [w.strip(".,?!") for w in text.split()]
+    errors = np.abs(np.array([w.start for w in words]) - onsets)
+    assert np.median(errors) <= 0.03 and np.percentile(errors, 95) < 0.1, (np.median(errors), errors.max())
+    for a, b in itertools.pairwise(words):
+        assert a.start < a.end <= b.start
+    same, phones = align_phones(audio, rate, text)
+    assert same == words
+    assert [p for p, _, _ in phones[:4]] == ["DH", "AH", "K", "W"]  # "the quick"
+    assert all(b > a for _, a, b in phones) and phones[-1][2] <= words[-1].end + 1e-6
+
+
+@pytest.mark.parametrize("case", ["half of the sentences", "the wrong sentences"])
+def test_long_audio_with_a_mismatched_transcript_is_an_error(corpus, case):
+    audio, _, _ = long_clip(corpus)
+    sentences = [t for t, _ in corpus]
+    transcript = {"half of the sentences": " ".join(sentences),
+                  "the wrong sentences": " ".join(sentences[::-1] * 2)}[case]
+    with pytest.raises(FacegenError, match="does not match the speech"):
+        align(audio, corpus[0][1].sample_rate, transcript)
 
 
 # ---------------------------------------------------------------------------- alignment files

@@ -1,0 +1,76 @@
+"""Long audio cut into pieces at its pauses, so that forced alignment runs piece by piece.
+
+Pocketsphinx's alignment passes cost time (and, for the state-level pass, memory) that grow faster than
+the audio's length, and one hard spot fails a whole long search. `facegen.align` therefore aligns pieces
+of about PIECE_SECONDS, cut in the middle of pauses found from the audio's energy (`loud_frames`): each
+piece but the last takes as many of the next transcript words as its speech holds (a grammar that may
+end after any word, `prefix_grammar`), the last one all the words left. Only some pieces, spread over
+the clip (`scored`), are scored by the mismatch check. A piece is aligned together with the first
+LOOKAHEAD frames after it, and keeps the words that start before its end: the words at a cut are aligned
+knowing what follows them, as in one long search (none squeezed into the pause, none left out).
+
+Frames are pocketsphinx's: 10 ms apart.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+RATE = 16000  # pocketsphinx's en-us model
+HOP = RATE // 100  # samples per 10 ms frame
+PIECE_SECONDS = 6.0  # a piece ends in the first pause after this much audio
+MIN_PAUSE = 0.25  # s of quiet audio that may separate two pieces
+SCORED_SECONDS = 10.0  # audio the mismatch check scores at least (all of it when shorter)
+LOOKAHEAD = 150  # frames of the next piece aligned with a piece, so that its last words have what follows
+
+
+def loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
+    """Frames (10 ms step, 25 ms window) clearly louder than the recording's noise floor."""
+    win = int(0.025 * RATE)
+    padded = np.pad(audio, (0, max(0, n_frames * HOP + win - len(audio))))
+    frames = np.lib.stride_tricks.sliding_window_view(padded, win)[::HOP][:n_frames]
+    energy = 10 * np.log10(np.mean(frames.astype(np.float64) ** 2, axis=1) + 1e-12)
+    low, high = np.percentile(energy, 10), np.percentile(energy, 95)
+    return energy > low + 0.5 * (high - low)
+
+
+def pieces(loud: np.ndarray) -> list[tuple[int, int]]:
+    """(first frame, end frame) of consecutive pieces covering every frame: each cut in the middle of a
+    run of at least MIN_PAUSE quiet frames, once the piece has PIECE_SECONDS; the last piece at least half
+    that long. One piece when the audio is short or has no pause."""
+    n, length, pause = len(loud), int(PIECE_SECONDS * 100), int(MIN_PAUSE * 100)
+    edges = np.flatnonzero(np.diff(np.concatenate([[1], loud.astype(np.int8), [1]])))  # quiet run bounds
+    cuts = [0]
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        middle = (start + end) // 2
+        if end - start >= pause and middle - cuts[-1] >= length and n - middle >= length // 2:
+            cuts.append(int(middle))
+    cuts.append(n)
+    return list(itertools.pairwise(cuts))
+
+
+def scored(spans: list[tuple[int, int]]) -> set[int]:
+    """Indices of the pieces the mismatch check scores: evenly spread, SCORED_SECONDS of audio at least."""
+    lengths = [b - a for a, b in spans]
+    for count in range(1, len(spans) + 1):
+        chosen = set(np.linspace(0, len(spans) - 1, count).round().astype(int).tolist())
+        if sum(lengths[i] for i in chosen) >= SCORED_SECONDS * 100:
+            return chosen
+    return set(range(len(spans)))
+
+
+def word_window(left: int, piece: int, rest: int) -> int:
+    """How many of the `left` transcript words a piece of `piece` frames is offered, out of `rest` frames
+    still to align: its share of the words with a wide margin (a piece taking them all is tried again)."""
+    return min(left, int(1.5 * left * piece / max(rest, 1)) + 8)
+
+
+def prefix_grammar(decoder, name: str, keys: list[str]):
+    """A pocketsphinx grammar of `keys` in order that may end after any of them. Each word also leads to the
+    final state (no empty transitions: their "(NULL)" segments would stop the state-level pass)."""
+    n = len(keys)
+    transitions = [(i, i + 1, 1.0, key) for i, key in enumerate(keys)]
+    transitions += [(i, n, 1.0, key) for i, key in enumerate(keys[:-1])]
+    return decoder.create_fsg(name, 0, n, transitions)
