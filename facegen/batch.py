@@ -3,7 +3,8 @@ model and text backend loaded once, decoder BiLSTMs run over packed batches of c
 one or more formats and validated; one result per clip (a failing clip never stops the others).
 
 What a whole `facegen batch` run adds around this (refusals before work, skipping unchanged items, worker
-processes or Ray, reports) is in batch_plan.py, engines.py, batch_report.py and batch_run.py.
+processes or Ray, reports) is in batch_plan.py, engines.py, batch_report.py and batch_run.py. Reading a
+manifest imports no torch: planning and skipping stay quick.
 """
 
 from __future__ import annotations
@@ -17,12 +18,9 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from facegen.bundle import Bundle, load_bundle
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, write_animation
-from facegen.inference import batch_decoder_states, frame_stream
-from facegen.pipeline import finish_animation, prepare_clip
-from facegen.runtime import Say, select_device, silent
+from facegen.runtime import Say, silent
 
 
 @dataclass
@@ -267,6 +265,11 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
                    window: int, warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
     """animate_many's (job, Animation or FacegenError) with the seconds spent on each job's preparation and
     its share of the network, and the notes said while preparing it (also passed to `warn`)."""
+    from facegen.bundle import Bundle, load_bundle  # torch: imported when clips run, not to read a manifest
+    from facegen.inference import batch_decoder_states, frame_stream
+    from facegen.pipeline import finish_animation, prepare_clip
+    from facegen.runtime import select_device
+
     if not isinstance(bundle, Bundle):
         bundle = load_bundle(bundle)
     dev = select_device(device, warn)

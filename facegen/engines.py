@@ -88,7 +88,7 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
 
     context = multiprocessing.get_context("forkserver" if sys.platform.startswith("linux") else "spawn")
     if context.get_start_method() == "forkserver":
-        context.set_forkserver_preload(["facegen.engines"])  # workers fork with facegen and torch imported
+        context.set_forkserver_preload(["facegen.engines", "facegen.pipeline"])  # forked with torch imported
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_local,
                                initargs=(model, device, text_model, threads))
     try:
@@ -172,7 +172,7 @@ def _connect(ray, address: str | None, workers: int | None) -> bool:
     """Join the cluster (True when this call started a local instance that must be shut down after)."""
     import logging
 
-    quiet = {"logging_level": logging.WARNING, "log_to_driver": False, "configure_logging": True}
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False, "configure_logging": True}
     if address is None and ray.is_initialized():
         return False
     if address is None:

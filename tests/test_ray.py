@@ -15,9 +15,9 @@ import pytest
 import soundfile as sf
 from helpers import grid_face, make_bundle
 
-ray = pytest.importorskip("ray")
+from facegen.batch_run import run_manifest
 
-from facegen.batch_run import run_manifest  # noqa: E402 - only with Ray installed
+ray = pytest.importorskip("ray")
 
 REPO = Path(__file__).resolve().parents[1]
 
