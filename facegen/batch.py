@@ -18,6 +18,8 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, write_animation
 from facegen.runtime import Say, silent
@@ -57,6 +59,7 @@ class JobResult:
     error: str | None = None
     frames: int = 0
     seconds: float = 0.0
+    cpu_seconds: float = 0.0  # this process's CPU time for the job (all its threads)
     audio_seconds: float = 0.0
     validation: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -263,8 +266,8 @@ def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text
 
 def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str | None, batch_size: int,
                    window: int, warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
-    """animate_many's (job, Animation or FacegenError) with the seconds spent on each job's preparation and
-    its share of the network, and the notes said while preparing it (also passed to `warn`)."""
+    """animate_many's (job, Animation or FacegenError) with the (wall, CPU) seconds spent on each job's
+    preparation and its share of the network, and the notes said while preparing it (also passed to `warn`)."""
     from facegen.bundle import Bundle, load_bundle  # torch: imported when clips run, not to read a manifest
     from facegen.inference import batch_decoder_states, frame_stream
     from facegen.pipeline import finish_animation, prepare_clip
@@ -277,10 +280,10 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
 
     def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object, float, list[str]]]:
         prepared: dict[int, object] = {}
-        seconds: dict[int, float] = {}
+        seconds: dict[int, np.ndarray] = {}
         notes: dict[int, list[str]] = {}
         for i, job in enumerate(window_jobs):
-            t0 = time.perf_counter()
+            t0 = _clocks()
             said = notes[i] = []
 
             def note(msg: str, said: list[str] = said) -> None:
@@ -297,18 +300,18 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error
                 prepared[i] = FacegenError(one_line(exc))
-            seconds[i] = time.perf_counter() - t0
+            seconds[i] = _clocks() - t0
         ready = sorted((i for i, c in prepared.items() if not isinstance(c, FacegenError)),
                        key=lambda i: prepared[i].num_frames)
         for b in range(0, len(ready), batch_size):
             ids = ready[b:b + batch_size]
-            t0 = time.perf_counter()
+            t0 = _clocks()
             clips = [prepared[i] for i in ids]
             states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker, c.phones) for c in clips],
                                           device=dev)
             for i, clip, st in zip(ids, clips, states, strict=True):
                 prepared[i] = finish_animation(bundle, clip, frame_stream(bundle, st, clip.mesh.vertices))
-                seconds[i] += (time.perf_counter() - t0) / len(ids)
+                seconds[i] += (_clocks() - t0) / len(ids)
         for i, job in enumerate(window_jobs):
             yield job, prepared[i], seconds[i], notes[i]
 
@@ -332,7 +335,7 @@ def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_mo
     for n, (job, anim, prep, notes) in enumerate(_animate_timed(jobs, bundle=bundle, device=device,
                                                                 text_model=text_model, batch_size=batch_size,
                                                                 window=64, warn=warn), 1):
-        t0 = time.perf_counter()
+        t0 = _clocks()
         result = JobResult(job, notes=notes)
         if isinstance(anim, FacegenError):
             result.error = one_line(anim)
@@ -347,12 +350,17 @@ def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_mo
                     result.validation = [_validation(t, anim) for t in job.targets]
             except Exception as exc:  # noqa: BLE001 - an OS error (name too long, disk full...) is this row's only
                 result.error = one_line(exc)
-        result.seconds = prep + time.perf_counter() - t0
+        result.seconds, result.cpu_seconds = (prep + _clocks() - t0).tolist()
         results.append(result)
         say(f"[{n}/{len(jobs)}] {job.output}: " + (f"{result.frames} frames" if result.ok else
                                                    f"{result.status}: {result.error or _failed(result)}")
             + f" ({time.perf_counter() - start:.1f} s)")
     return results
+
+
+def _clocks() -> np.ndarray:
+    """(wall, CPU) seconds now."""
+    return np.array([time.perf_counter(), time.process_time()])
 
 
 def _validation(path: Path, anim) -> dict:

@@ -46,7 +46,7 @@ def item_dict(result: JobResult, out_dir: str | os.PathLike) -> dict:
             "outputs": [os.path.relpath(t, out_dir) for t in job.targets], "status": result.status,
             "error": result.error, "files": [os.path.relpath(f, out_dir) for f in result.files],
             "frames": result.frames, "audio_seconds": round(result.audio_seconds, 3),
-            "seconds": round(result.seconds, 3), "validation": result.validation, "notes": result.notes}
+            "seconds": round(result.seconds, 3), "cpu_seconds": round(result.cpu_seconds, 3), "validation": result.validation, "notes": result.notes}
 
 
 def write_reports(results: list[JobResult], out_dir: str | os.PathLike, run: dict) -> tuple[Path, Path]:

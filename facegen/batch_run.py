@@ -140,7 +140,9 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     ordered = [results[i] for i in range(len(all_jobs))]
     run = {"manifest": str(manifest), "out": str(out), "engine": engine, "jobs": jobs or None,
            "formats": exts, "force": force, "started": started, "seconds": round(seconds, 3),
-           "model": str(model_path) if model_path else "default", "model_sha256": options["model"]}
+           "model": str(model_path) if model_path else "default", "model_sha256": options["model"],
+           "audio_seconds": round(sum(r.audio_seconds for r in ordered if not r.skipped), 3),
+           "worker_cpu_seconds": round(sum(r.cpu_seconds for r in ordered), 3)}
     report_json, report_xml = write_reports(ordered, out, run)
     return BatchOutcome(ordered, seconds, summary_line(ordered, seconds, out), report_json, report_xml)
 
