@@ -57,8 +57,15 @@ _worker: Worker | None = None  # the local engine's worker of this process (set 
 
 
 def _init_local(model: str | None, device: str, text_model: str | None, threads: int) -> None:
+    import signal
+
     global _worker
     _worker = Worker(model, device, text_model, threads)
+    signal.signal(signal.SIGTERM, _exit)  # from _stop_workers: unwind the atomic writes, exit without a traceback
+
+
+def _exit(signum: int, _frame) -> None:
+    raise SystemExit(128 + signum)
 
 
 def _run_local(jobs: Sequence[Job], batch_size: int) -> list[JobResult]:
@@ -104,8 +111,23 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
                     results = [JobResult(job, error=why) for job in chunk]
                 for result in results:
                     on_result(result)
+    except BaseException:  # Ctrl-C, SIGTERM, an error in on_result: stop the workers now, not after their chunks
+        _stop_workers(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stop_workers(pool: ProcessPoolExecutor, grace: float = 5.0) -> None:
+    """Terminate the pool's processes (SIGTERM: each unwinds its atomic writes), killing those that linger.
+    A temporary file a killed worker leaves is removed by the next run (facegen.atomic)."""
+    processes = list((pool._processes or {}).values())  # no public API for this before Python 3.14
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(grace)
+        if process.is_alive():
+            process.kill()
 
 
 class _RayWorker(Worker):
