@@ -143,14 +143,28 @@ def run_ray(jobs: Sequence[Job], *, workers: int | None, address: str | None, mo
     ray = _import_ray()
     started = _connect(ray, address, workers)
     try:
-        from ray.util import ActorPool
-
         n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
         actor = ray.remote(num_cpus=1)(_RayWorker)
-        actors = [actor.remote(model, device, text_model, 1) for _ in range(min(n, len(jobs)))]
-        pool = ActorPool(actors)
-        for results in pool.map_unordered(lambda a, chunk: a.run.remote(chunk, batch_size),
-                                          chunks(jobs, len(actors), batch_size)):
+        idle = [actor.remote(model, device, text_model, 1) for _ in range(min(n, len(jobs)))]
+        queue = chunks(jobs, len(idle), batch_size)
+        running: dict = {}  # task -> (actor, chunk)
+        while queue or running:
+            while idle and queue:
+                worker, chunk = idle.pop(), queue.pop(0)
+                running[worker.run.remote(chunk, batch_size)] = (worker, chunk)
+            if not running:  # every actor died: what is left cannot run
+                queue, failed = [], [job for chunk in queue for job in chunk]
+                results = [JobResult(job, error="no Ray worker is left: rerun the batch") for job in failed]
+            else:
+                (task,), _ = ray.wait(list(running), num_returns=1)
+                worker, chunk = running.pop(task)
+                try:
+                    results = ray.get(task)
+                    idle.append(worker)
+                except ray.exceptions.RayError as exc:  # the actor died (or its node): only this chunk fails
+                    why = " ".join(str(exc).split())[:200]
+                    results = [JobResult(job, error=f"the Ray worker failed ({why}): rerun the batch to redo this "
+                                                    "item") for job in chunk]
             for result in results:
                 on_result(result)
     finally:
