@@ -1,8 +1,16 @@
-"""Many clips at once: manifests (CSV/JSON), the model and text backend loaded once, decoder BiLSTMs run over
-packed batches of clips, one result per clip (a failing clip never stops the others)."""
+"""Many clips in one process: manifests (CSV, JSON, JSON lines) read into Jobs with their line numbers, the
+model and text backend loaded once, decoder BiLSTMs run over packed batches of clips, each clip written in
+one or more formats and validated; one result per clip (a failing clip never stops the others).
+
+What a whole `facegen batch` run adds around this (refusals before work, skipping unchanged items, worker
+processes or Ray, reports) is in batch_plan.py, engines.py, batch_report.py and batch_run.py. Reading a
+manifest imports no torch: planning and skipping stay quick.
+"""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import time
@@ -10,17 +18,20 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from facegen.bundle import Bundle, load_bundle
+import numpy as np
+
 from facegen.errors import FacegenError
-from facegen.exchange import format_module, write_animation
-from facegen.inference import batch_decoder_states, frame_stream
-from facegen.pipeline import finish_animation, prepare_clip
-from facegen.runtime import Say, select_device, silent
+from facegen.exchange import format_of, write_animation
+from facegen.runtime import Say, silent
 
 
 @dataclass
 class Job:
-    """One clip to animate: the audio, where its words come from, the speaker, the output file."""
+    """One clip to animate: the audio, where its words come from, the speaker, the output file(s).
+
+    `outputs` (when given) are the files to write from the one inference, `output` first; `line` is the
+    manifest line the job comes from (0: not from a manifest); `problem` is why the row cannot run (e.g. an
+    unreadable transcript file), reported as its error without stopping the others."""
 
     audio: Path
     output: Path
@@ -28,81 +39,214 @@ class Job:
     alignment: Path | None = None
     speaker: str | None = None
     no_text: bool = False
+    line: int = 0
+    outputs: tuple[Path, ...] = ()
+    problem: str | None = None
+
+    @property
+    def targets(self) -> tuple[Path, ...]:
+        """Every file this job writes (besides audio sidecars), `output` first."""
+        return self.outputs or (self.output,)
 
 
 @dataclass
 class JobResult:
+    """What became of one job: the files written, or its one-line error; each file's validation
+    ({"file", "ok", "failures", "warnings"}); `skipped` when it was unchanged since the last run."""
+
     job: Job
     files: list[Path] = field(default_factory=list)
     error: str | None = None
     frames: int = 0
     seconds: float = 0.0
+    cpu_seconds: float = 0.0  # this process's CPU time for the job (all its threads)
+    audio_seconds: float = 0.0
+    validation: list[dict] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    skipped: bool = False
 
     @property
     def ok(self) -> bool:
-        return self.error is None
+        return self.error is None and all(v["ok"] for v in self.validation)
+
+    @property
+    def status(self) -> str:
+        """"skipped", "passed", "failed" (written, but a validation check failed) or "error" (not written)."""
+        if self.error is not None:
+            return "error"
+        if self.skipped:
+            return "skipped"
+        return "passed" if self.ok else "failed"
 
 
 MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output")
 
 
+def one_line(exc: BaseException) -> str:
+    """An exception as one line: its message (a FacegenError's own), or its type and message."""
+    text = str(exc) if isinstance(exc, FacegenError) else f"{type(exc).__name__}: {exc}"
+    return " ".join(text.split()) or type(exc).__name__
+
+
 def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = None,
-                  default_ext: str = ".usdc") -> list[Job]:
-    """Jobs from a CSV (header: audio, text | text_file | alignment, speaker, output) or a JSON manifest
-    (a list of objects with those keys, or {"jobs": [...]}).
+                  default_ext: str = ".usdc", formats: Sequence[str] | None = None) -> list[Job]:
+    """Jobs from a manifest: a CSV (header: audio, text | text_file | alignment, speaker, output), a JSON list
+    of objects with those keys (or {"jobs": [...]}), or JSON lines (one object per line).
 
     Relative audio/text_file/alignment paths are relative to the manifest's folder; relative outputs to
     `outdir` (default: the manifest's folder). A missing output is the audio's name with `default_ext`.
-    A row with neither text nor alignment has its words recognised (as `facegen animate` without --text).
+    With `formats` (extensions such as ".usdc", ".glb"), each job writes its output's stem in every one of
+    them. A row with neither text nor alignment has its words recognised (as `facegen animate` without
+    --text). A malformed manifest is a FacegenError naming the line; a transcript file that cannot be read
+    makes only its row fail (`Job.problem`).
     """
-    import csv
-
     path = Path(path)
     try:
         raw = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise FacegenError(f"cannot read manifest {path} ({exc}): pass a UTF-8 CSV or JSON file") from exc
-    if raw.lstrip().startswith(("[", "{")):
-        try:
-            data = json.loads(raw)
-        except json.JSONDecodeError as exc:
-            raise FacegenError(f"manifest {path} is not valid JSON ({exc}): fix it") from exc
-        rows = data.get("jobs") if isinstance(data, dict) else data
-        if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
-            raise FacegenError(f'manifest {path} must be a list of objects or {{"jobs": [...]}}')
-    else:
-        rows = list(csv.DictReader(raw.splitlines()))
+    rows = _json_rows(raw, path) if raw.lstrip().startswith(("[", "{")) else _csv_rows(raw, path)
+    for ext in formats or ():
+        format_of(f"x{ext}")
     base = path.parent
     out_base = Path(outdir) if outdir is not None else base
-    jobs = []
-    for n, row in enumerate(rows, 1):
-        row = {str(k).strip().lower(): (str(v).strip() if v is not None else "") for k, v in row.items() if k}
-        unknown = sorted(set(row) - set(MANIFEST_COLUMNS))
-        if unknown:
-            raise FacegenError(f"manifest {path}: unknown column(s) {', '.join(unknown)}: use "
-                               f"{', '.join(MANIFEST_COLUMNS)}")
-        if not row.get("audio"):
-            raise FacegenError(f"manifest {path}, row {n}: no audio file given")
-        audio = base / row["audio"]
-        text = row.get("text") or None
-        if row.get("text_file"):
-            try:
-                text = (base / row["text_file"]).read_text(encoding="utf-8")
-            except (OSError, UnicodeDecodeError) as exc:
-                raise FacegenError(f"manifest {path}, row {n}: cannot read {row['text_file']} ({exc})") from exc
-        alignment = base / row["alignment"] if row.get("alignment") else None
-        if text and alignment:
-            raise FacegenError(f"manifest {path}, row {n}: give text or alignment, not both")
-        output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
-        try:
-            format_module(output)
-        except FacegenError as exc:
-            raise FacegenError(f"manifest {path}, row {n}: {exc}") from None
-        jobs.append(Job(audio=audio, output=out_base / output, text=text, alignment=alignment,
-                        speaker=row.get("speaker") or None))
+    jobs = [_job(row, line, path, base, out_base, default_ext, formats) for line, row in rows]
     if not jobs:
-        raise FacegenError(f"manifest {path} lists no clips")
+        raise FacegenError(f"manifest {path} lists no clips: add rows (audio, text or alignment, output)")
     return jobs
+
+
+def _csv_rows(raw: str, path: Path) -> list[tuple[int, dict]]:
+    reader = csv.reader(io.StringIO(raw))
+    rows: list[tuple[int, dict]] = []
+    try:
+        header = next(reader, None)
+        if not header or not any(h.strip() for h in header):
+            raise FacegenError(f"manifest {path}, line 1: no header row: start with a line such as "
+                               "'audio,text,output'")
+        names = [h.strip().lower() for h in header]
+        _check_columns(names, path, reader.line_num)
+        for fields in reader:
+            if not any(f.strip() for f in fields):
+                continue
+            if len(fields) != len(names):
+                raise FacegenError(f"manifest {path}, line {reader.line_num}: {len(fields)} fields where the "
+                                   f"header has {len(names)}: quote fields that contain commas")
+            rows.append((reader.line_num, dict(zip(names, fields, strict=True))))
+    except csv.Error as exc:
+        raise FacegenError(f"manifest {path}, line {reader.line_num}: not valid CSV ({exc}): fix that line") from exc
+    return rows
+
+
+def _check_columns(names: list[str], path: Path, line: int) -> None:
+    unknown = sorted(set(names) - set(MANIFEST_COLUMNS))
+    if unknown:
+        raise FacegenError(f"manifest {path}, line {line}: unknown column(s) {', '.join(unknown)}: use "
+                           f"{', '.join(MANIFEST_COLUMNS)}")
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise FacegenError(f"manifest {path}, line {line}: column {', '.join(repeated)} given twice: keep one")
+
+
+def _json_rows(raw: str, path: Path) -> list[tuple[int, dict]]:
+    """(line, object) for a JSON list, {"jobs": [...]} or JSON lines."""
+    decoder = json.JSONDecoder()
+    try:
+        data = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        first = raw.lstrip().splitlines()[0] if raw.strip() else ""
+        if exc.msg == "Extra data" and first.startswith("{"):
+            return _json_lines(raw, path)
+        raise FacegenError(f"manifest {path}, line {exc.lineno}: not valid JSON ({exc.msg}): fix it") from exc
+    if isinstance(data, dict) and "jobs" not in data:  # one object: JSON lines with one row
+        return _json_lines(raw, path)
+    start = raw.index("[") if isinstance(data, list) else _jobs_array(raw, path, decoder)
+    rows = []
+    pos = start + 1
+    while True:
+        pos = _skip(raw, pos, ",")
+        if raw[pos] == "]":
+            break
+        item, end = decoder.raw_decode(raw, pos)
+        rows.append((_line_of(raw, pos), _object(item, path, _line_of(raw, pos))))
+        pos = end
+    return rows
+
+
+def _jobs_array(raw: str, path: Path, decoder: json.JSONDecoder) -> int:
+    """The offset of the "jobs" list of a manifest object (its value checked to be a list)."""
+    pos = _skip(raw, raw.index("{") + 1, ",")
+    while raw[pos] != "}":
+        key, pos = decoder.raw_decode(raw, pos)
+        pos = _skip(raw, pos, ":")
+        if key == "jobs" and raw[pos] == "[":
+            return pos
+        _, pos = decoder.raw_decode(raw, pos)
+        pos = _skip(raw, pos, ",")
+    raise FacegenError(f'manifest {path}: a JSON manifest must be a list of objects or {{"jobs": [...]}}')
+
+
+def _json_lines(raw: str, path: Path) -> list[tuple[int, dict]]:
+    rows = []
+    for n, text in enumerate(raw.splitlines(), 1):
+        if not text.strip():
+            continue
+        try:
+            item = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise FacegenError(f"manifest {path}, line {n}: not valid JSON ({exc.msg}): one object per line") from exc
+        rows.append((n, _object(item, path, n)))
+    return rows
+
+
+def _skip(raw: str, pos: int, separators: str) -> int:
+    while raw[pos].isspace() or raw[pos] in separators:
+        pos += 1
+    return pos
+
+
+def _line_of(raw: str, pos: int) -> int:
+    return raw.count("\n", 0, pos) + 1
+
+
+def _object(item, path: Path, line: int) -> dict:
+    if not isinstance(item, dict):
+        raise FacegenError(f"manifest {path}, line {line}: expected an object with audio, text, output, ... "
+                           f"but found {type(item).__name__}")
+    row = {}
+    for key, value in item.items():
+        if isinstance(value, (dict, list)):
+            raise FacegenError(f"manifest {path}, line {line}: {key} must be a string or number")
+        row[str(key).strip().lower()] = "" if value is None else str(value)
+    _check_columns(list(row), path, line)
+    return row
+
+
+def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_ext: str,
+         formats: Sequence[str] | None) -> Job:
+    row = {k: v.strip() for k, v in row.items()}
+    where = f"manifest {path}, line {line}"
+    if not row.get("audio"):
+        raise FacegenError(f"{where}: no audio file given")
+    given = [k for k in ("text", "text_file", "alignment") if row.get(k)]
+    if len(given) > 1:
+        raise FacegenError(f"{where}: give one of text, text_file or alignment, not {' and '.join(given)}")
+    text, problem = row.get("text") or None, None
+    if row.get("text_file"):
+        try:
+            text = (base / row["text_file"]).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            problem = f"cannot read transcript file {row['text_file']} ({exc}): fix the path or the file"
+    output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
+    try:
+        format_of(output)
+    except FacegenError as exc:
+        raise FacegenError(f"{where}: {exc}") from None
+    out = out_base / output
+    outputs = tuple(out.with_suffix(ext) for ext in formats) if formats else ()
+    return Job(audio=base / row["audio"], output=outputs[0] if outputs else out, text=text,
+               alignment=base / row["alignment"] if row.get("alignment") else None,
+               speaker=row.get("speaker") or None, line=line, outputs=outputs, problem=problem)
 
 
 def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
@@ -115,31 +259,61 @@ def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text
     time (packed: each clip's result equals its own single run). The frames of each Animation are a
     FrameStream (computed when the writer reads them).
     """
+    for job, anim, _, _ in _animate_timed(jobs, bundle=bundle, device=device, text_model=text_model,
+                                          batch_size=batch_size, window=window, warn=warn):
+        yield job, anim
+
+
+def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str | None, batch_size: int,
+                   window: int, warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
+    """animate_many's (job, Animation or FacegenError) with the (wall, CPU) seconds spent on each job's
+    preparation and its share of the network, and the notes said while preparing it (also passed to `warn`)."""
+    from facegen.bundle import Bundle, load_bundle  # torch: imported when clips run, not to read a manifest
+    from facegen.inference import batch_decoder_states, frame_stream
+    from facegen.pipeline import finish_animation, prepare_clip
+    from facegen.runtime import select_device
+
     if not isinstance(bundle, Bundle):
         bundle = load_bundle(bundle)
     dev = select_device(device)
     pending: list[Job] = []
 
-    def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object]]:
+    def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object, float, list[str]]]:
         prepared: dict[int, object] = {}
+        seconds: dict[int, np.ndarray] = {}
+        notes: dict[int, list[str]] = {}
         for i, job in enumerate(window_jobs):
+            t0 = _clocks()
+            said = notes[i] = []
+
+            def note(msg: str, said: list[str] = said) -> None:
+                said.append(msg)
+                warn(msg)
+
             try:
+                if job.problem:
+                    raise FacegenError(job.problem)
                 prepared[i] = prepare_clip(job.audio, bundle=bundle, text=job.text, alignment=job.alignment,
                                            no_text=job.no_text, speaker=job.speaker, text_model=text_model,
-                                           warn=warn)
+                                           warn=note)
             except FacegenError as exc:
                 prepared[i] = exc
+            except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error
+                prepared[i] = FacegenError(one_line(exc))
+            seconds[i] = _clocks() - t0
         ready = sorted((i for i, c in prepared.items() if not isinstance(c, FacegenError)),
                        key=lambda i: prepared[i].num_frames)
         for b in range(0, len(ready), batch_size):
             ids = ready[b:b + batch_size]
+            t0 = _clocks()
             clips = [prepared[i] for i in ids]
             states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker, c.phones) for c in clips],
                                           device=dev)
             for i, clip, st in zip(ids, clips, states, strict=True):
                 prepared[i] = finish_animation(bundle, clip, frame_stream(bundle, st, clip.mesh.vertices))
+                seconds[i] += (_clocks() - t0) / len(ids)
         for i, job in enumerate(window_jobs):
-            yield job, prepared[i]
+            yield job, prepared[i], seconds[i], notes[i]
 
     for job in jobs:
         pending.append(job)
@@ -151,25 +325,52 @@ def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text
 
 
 def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-              batch_size: int = 16, say: Say = silent, warn: Say = silent) -> list[JobResult]:
-    """Animate every job and write its output (format from the extension); a clip that fails is
-    reported in its JobResult and the others go on. Returns one JobResult per job, in order."""
+              batch_size: int = 16, validate: bool = True, say: Say = silent, warn: Say = silent) -> list[JobResult]:
+    """Animate every job and write each of its targets (format from the extension) from one inference, then
+    (`validate`) check each file as `facegen validate` does. A clip that fails is reported in its JobResult
+    and the others go on; notes (e.g. "no transcript given") go to `warn` and into the result. Returns one
+    JobResult per job, in order."""
     results = []
     start = time.perf_counter()
-    for n, (job, anim) in enumerate(animate_many(jobs, bundle=bundle, device=device, text_model=text_model,
-                                                 batch_size=batch_size, warn=warn), 1):
-        t0 = time.perf_counter()
+    for n, (job, anim, prep, notes) in enumerate(_animate_timed(jobs, bundle=bundle, device=device,
+                                                                text_model=text_model, batch_size=batch_size,
+                                                                window=64, warn=warn), 1):
+        t0 = _clocks()
+        result = JobResult(job, notes=notes)
         if isinstance(anim, FacegenError):
-            results.append(JobResult(job, error=str(anim)))
+            result.error = one_line(anim)
         else:
+            result.frames, result.audio_seconds = anim.num_frames, len(anim.audio) / anim.sample_rate
             try:
-                job.output.parent.mkdir(parents=True, exist_ok=True)
-                files = write_animation(anim, job.output, audio_source=job.audio)
-                results.append(JobResult(job, files=files, frames=anim.num_frames,
-                                         seconds=time.perf_counter() - t0))
-            except FacegenError as exc:
-                results.append(JobResult(job, error=str(exc)))
-        r = results[-1]
-        say(f"[{n}/{len(jobs)}] {job.output}: " + (f"{r.frames} frames" if r.ok else f"error: {r.error}")
+                for target in job.targets:
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    result.files += [f for f in write_animation(anim, target, audio_source=job.audio)
+                                     if f not in result.files]
+                if validate:
+                    result.validation = [_validation(t, anim) for t in job.targets]
+            except Exception as exc:  # noqa: BLE001 - an OS error (name too long, disk full...) is this row's only
+                result.error = one_line(exc)
+        result.seconds, result.cpu_seconds = (prep + _clocks() - t0).tolist()
+        results.append(result)
+        say(f"[{n}/{len(jobs)}] {job.output}: " + (f"{result.frames} frames" if result.ok else
+                                                   f"{result.status}: {result.error or _failed(result)}")
             + f" ({time.perf_counter() - start:.1f} s)")
     return results
+
+
+def _clocks() -> np.ndarray:
+    """(wall, CPU) seconds now."""
+    return np.array([time.perf_counter(), time.process_time()])
+
+
+def _validation(path: Path, anim) -> dict:
+    """`facegen validate`'s verdict on a written file, against the clip's template and frame rate."""
+    from facegen.validate import validate
+
+    report = validate(path, template=anim.mesh, fps=anim.fps)
+    return {"file": str(path), "ok": report.ok, "failures": [f"{c.name}: {c.detail}" for c in report.failures],
+            "warnings": [f"{c.name}: {c.detail}" for c in report.warnings]}
+
+
+def _failed(result: JobResult) -> str:
+    return "; ".join(f"{Path(v['file']).name}: {', '.join(v['failures'])}" for v in result.validation if not v["ok"])

@@ -1,0 +1,223 @@
+"""Where a batch's items run: worker processes on this machine, or Ray tasks on a cluster.
+
+Both engines run the same code on the same chunks of Jobs: a worker loads the model bundle and text model
+once (`Worker`), then animates, writes and validates chunk after chunk (`facegen.batch.run_batch`), so the
+two give the same files. The local engine is a process pool whose initializer builds the worker (one torch
+thread per core it owns); the Ray engine runs one actor per worker on an existing cluster (`--ray-address`)
+or on a local instance it starts, writing to the same output paths (on a cluster: a shared file system
+mounted at the same path on every node). Ray is an optional extra: `pip install 'facegen[ray]'`.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from facegen.batch import Job, JobResult, run_batch
+from facegen.errors import FacegenError
+
+ENGINES = ("local", "ray")
+OnResult = Callable[[JobResult], None]
+
+
+def cores() -> int:
+    """The CPU cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS, Windows
+        return os.cpu_count() or 1
+
+
+class Worker:
+    """The model and text model loaded once, and the chunks run with them."""
+
+    def __init__(self, model: str | None, device: str, text_model: str | None, threads: int) -> None:
+        import torch
+
+        from facegen.bundle import load_bundle
+
+        torch.set_num_threads(max(1, threads))
+        self.bundle = load_bundle(model)
+        self.device, self.text_model = device, text_model
+        if self.bundle.config.uses_text:
+            from facegen.text import load_text_backend
+
+            load_text_backend(self.bundle.text_backend, text_model)  # cached for every clip of this process
+
+    def run(self, jobs: Sequence[Job], batch_size: int) -> list[JobResult]:
+        return run_batch(jobs, bundle=self.bundle, device=self.device, text_model=self.text_model,
+                         batch_size=batch_size)
+
+
+_worker: Worker | None = None  # the local engine's worker of this process (set by the pool's initializer)
+
+
+def _init_local(model: str | None, device: str, text_model: str | None, threads: int) -> None:
+    import signal
+
+    global _worker
+    _worker = Worker(model, device, text_model, threads)
+    signal.signal(signal.SIGTERM, _exit)  # from _stop_workers: unwind the atomic writes, exit without a traceback
+
+
+def _exit(signum: int, _frame) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _run_local(jobs: Sequence[Job], batch_size: int) -> list[JobResult]:
+    return _worker.run(jobs, batch_size)
+
+
+def chunks(jobs: Sequence[Job], workers: int, batch_size: int) -> list[list[Job]]:
+    """Jobs in chunks small enough to keep every worker busy (about 4 per worker) and at most `batch_size`
+    long (the clips of a chunk go through the network together)."""
+    size = max(1, min(batch_size, len(jobs) // (4 * workers)))
+    return [list(jobs[i:i + size]) for i in range(0, len(jobs), size)]
+
+
+def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: str, text_model: str | None,
+              batch_size: int, on_result: OnResult) -> None:
+    """Run `jobs` in `workers` processes (in this process when 1), each loading the model once; every result
+    goes to `on_result` as it comes. A worker process that dies makes its unfinished items errors (a new
+    run redoes only them)."""
+    threads = max(1, cores() // workers)
+    if workers == 1:
+        worker = Worker(model, device, text_model, threads)
+        for chunk in chunks(jobs, 1, batch_size):
+            for result in worker.run(chunk, batch_size):
+                on_result(result)
+        return
+    import multiprocessing
+
+    context = multiprocessing.get_context("forkserver" if sys.platform.startswith("linux") else "spawn")
+    if context.get_start_method() == "forkserver":
+        context.set_forkserver_preload(["facegen.engines", "facegen.pipeline"])  # forked with torch imported
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_local,
+                               initargs=(model, device, text_model, threads))
+    try:
+        pending = {pool.submit(_run_local, chunk, batch_size): chunk for chunk in chunks(jobs, workers, batch_size)}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                chunk = pending.pop(future)
+                try:
+                    results = future.result()
+                except BrokenProcessPool as exc:
+                    why = f"a worker process died ({exc or 'killed'}): rerun the batch to redo this item"
+                    results = [JobResult(job, error=why) for job in chunk]
+                for result in results:
+                    on_result(result)
+    except BaseException:  # Ctrl-C, SIGTERM, an error in on_result: stop the workers now, not after their chunks
+        _stop_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stop_workers(pool: ProcessPoolExecutor, grace: float = 5.0) -> None:
+    """Terminate the pool's processes (SIGTERM: each unwinds its atomic writes), killing those that linger.
+    A temporary file a killed worker leaves is removed by the next run (facegen.atomic)."""
+    processes = list((pool._processes or {}).values())  # no public API for this before Python 3.14
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(grace)
+        if process.is_alive():
+            process.kill()
+
+
+class _RayWorker(Worker):
+    """A Ray actor: one Worker per actor process."""
+
+
+def run_ray(jobs: Sequence[Job], *, workers: int | None, address: str | None, model: str | None, device: str,
+            text_model: str | None, batch_size: int, on_result: OnResult) -> None:
+    """Run `jobs` as Ray actor tasks: on the cluster at `address` (host:port, ray://host:port or auto), else on
+    the Ray instance this process already joined, else on a local instance started here (127.0.0.1, one CPU
+    per worker). `workers`: actors to start (default: the cluster's CPUs). Every path must be the same on
+    every node (a shared file system)."""
+    ray = _import_ray()
+    started = _connect(ray, address, workers)
+    try:
+        n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        actor = ray.remote(num_cpus=1)(_RayWorker)
+        idle = [actor.remote(model, device, text_model, 1) for _ in range(min(n, len(jobs)))]
+        queue = chunks(jobs, len(idle), batch_size)
+        running: dict = {}  # task -> (actor, chunk)
+        while queue or running:
+            while idle and queue:
+                worker, chunk = idle.pop(), queue.pop(0)
+                running[worker.run.remote(chunk, batch_size)] = (worker, chunk)
+            if not running:  # every actor died: what is left cannot run
+                queue, failed = [], [job for chunk in queue for job in chunk]
+                results = [JobResult(job, error="no Ray worker is left: rerun the batch") for job in failed]
+            else:
+                (task,), _ = ray.wait(list(running), num_returns=1)
+                worker, chunk = running.pop(task)
+                try:
+                    results = ray.get(task)
+                    idle.append(worker)
+                except ray.exceptions.RayError as exc:  # the actor died (or its node): only this chunk fails
+                    why = " ".join(str(exc).split())[:200]
+                    results = [JobResult(job, error=f"the Ray worker failed ({why}): rerun the batch to redo this "
+                                                    "item") for job in chunk]
+            for result in results:
+                on_result(result)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def check_ray(address: str | None) -> None:
+    """Refuse, before any work, `--engine ray` without Ray installed or with an address that does not answer."""
+    _import_ray()
+    if address is not None:
+        check_address(address)
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError as exc:
+        raise FacegenError("--engine ray needs Ray, which is not installed: pip install 'facegen[ray]' "
+                           "(or use --engine local)") from exc
+    return ray
+
+
+def check_address(address: str, timeout: float = 5.0) -> None:
+    """Refuse a Ray address whose host:port does not answer (before Ray's own long retries)."""
+    if address == "auto":
+        return
+    hostport = address.split("://", 1)[-1].rstrip("/")
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise FacegenError(f"--ray-address {address!r} is not host:port (e.g. 10.0.0.5:6379 or "
+                           "ray://10.0.0.5:10001)")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise FacegenError(f"cannot reach the Ray cluster at {address} ({exc.strerror or exc}): start it with "
+                           "`ray start --head` or fix --ray-address") from exc
+
+
+def _connect(ray, address: str | None, workers: int | None) -> bool:
+    """Join the cluster (True when this call started a local instance that must be shut down after)."""
+    import logging
+
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False, "configure_logging": True}
+    if address is None and ray.is_initialized():
+        return False
+    if address is None:
+        ray.init(num_cpus=workers or cores(), include_dashboard=False, _node_ip_address="127.0.0.1", **quiet)
+        return True
+    check_address(address)
+    try:
+        ray.init(address=address, **quiet)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise FacegenError(f"cannot join the Ray cluster at {address} ({' '.join(str(exc).split())[:200]}): "
+                           "check --ray-address and that the cluster's Ray version matches") from exc
+    return True
