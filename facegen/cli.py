@@ -329,20 +329,22 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
     """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment, speaker,
     output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run are
     skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed."""
-    from tqdm import tqdm
-
     from facegen.batch_run import run_manifest
+    from facegen.runtime import progress_bar
 
-    bar = tqdm(total=0, unit="clip", file=sys.stderr, disable=quiet or not sys.stderr.isatty(), leave=False)
+    bars = []  # made once the plan says how many items there are
 
     def planned(total: int, _to_run: int) -> None:
-        bar.reset(total=total)
+        bars.append(progress_bar(total=total, desc="batch", unit="clip", enabled=not quiet, leave=False))
 
-    with bar:
+    try:
         outcome = run_manifest(manifest, output_dir, jobs=jobs, formats=formats, force=force, engine=engine,
                                ray_address=ray_address, model=model, text_model=text_model, device=device,
                                batch_size=batch_size, default_ext=ext, on_plan=planned,
-                               on_result=lambda _r: bar.update(1))
+                               on_result=lambda _r: bars and bars[0].update(1))
+    finally:
+        for bar in bars:
+            bar.close()
     for r in outcome.results:
         if r.status in ("failed", "error"):
             why = r.error or "; ".join(f for v in r.validation for f in v["failures"])

@@ -280,7 +280,7 @@ def test_read_manifest(tmp_path):
     with pytest.raises(FacegenError, match="unknown column"):
         read_manifest(tmp_path / "bad.csv")
     (tmp_path / "bad2.csv").write_text("audio,output\na.wav,a.fbx\n")
-    with pytest.raises(FacegenError, match="row 1.*unknown extension"):
+    with pytest.raises(FacegenError, match="line 2.*unknown extension"):
         read_manifest(tmp_path / "bad2.csv")
 
 
