@@ -17,9 +17,9 @@ On the CPU the output layer runs through numpy's BLAS (OpenBLAS): on the AMD EPY
 is about twice as fast as torch's MKL sgemm for this shape (benchmarks/RESULTS.md). On CUDA both parts
 run on the GPU and blocks are copied back.
 
-Long clips in bounded memory need writers that read a FrameStream block by block (.npy can; a USD layer
-keeps every authored `points` sample in memory until it is saved — 1.04 x the frames' size, measured —
-so a points .usdc of 10 minutes needs ~4.4 GB whatever the inference does).
+Long clips in bounded memory need writers that read a FrameStream block by block: .npy does, and so does USD
+points mode past 3,000 frames, as value clips (facegen.exchange.usd_clips: one layer per block of frames,
+each saved and released; a single USD layer keeps every authored sample until it is saved).
 """
 
 from __future__ import annotations
