@@ -203,7 +203,7 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
     except RecursionError as exc:
         raise FacegenError(f"alignment {path} is nested too deeply to be word timings: write it as "
                            "Gentle/WhisperX/plain JSON, a TextGrid or a CSV with word,start,end columns") from exc
-    except (ValueError, KeyError, TypeError, IndexError, csv.Error) as exc:  # JSONDecodeError is a ValueError
+    except (ValueError, KeyError, TypeError, IndexError, AttributeError, csv.Error) as exc:  # JSON: ValueError
         raise FacegenError(f"alignment {path} is malformed ({exc}): write it as Gentle/WhisperX/plain JSON, "
                            "a TextGrid or a CSV with word,start,end columns") from exc
     _validate(words, path, duration)
