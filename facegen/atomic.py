@@ -105,13 +105,14 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
 
 def disk_full_error(target: str | os.PathLike, exc: BaseException | None, need_bytes: int = 0) -> FacegenError | None:
     """The one-line error for a write of `target` that failed with `exc` because its disk is full (an OSError
-    with ENOSPC/EDQUOT, or any error while less than LOW_SPACE bytes are free), else None."""
+    with ENOSPC/EDQUOT, or any error while less than LOW_SPACE bytes are free), else None; `need_bytes` is what
+    the write had reached when it failed (a lower bound of what it needs)."""
     target = Path(target)
     folder = target.parent if str(target.parent) else Path(".")
     full = isinstance(exc, OSError) and exc.errno in FULL_ERRNOS
     if not full and exc is not None and not isinstance(exc, (KeyboardInterrupt, SystemExit)):
         with contextlib.suppress(OSError):
-            full = shutil.disk_usage(folder).free < max(LOW_SPACE, need_bytes)
+            full = shutil.disk_usage(folder).free < LOW_SPACE
     if not full:
         return None
     return FacegenError(f"no space left on {_device(folder)} writing {target}: need about "
@@ -126,21 +127,12 @@ def _device(folder: Path) -> str:
     return str(path)
 
 
-def check_space(target: str | os.PathLike, need_bytes: int) -> None:
-    """Refuse, before any work, a write of about `need_bytes` into a folder with less free space."""
-    target = Path(target)
-    folder = target.parent if str(target.parent) else Path(".")
-    with contextlib.suppress(OSError):
-        if shutil.disk_usage(folder).free < need_bytes:
-            raise disk_full_error(target, OSError(errno.ENOSPC, "full"), need_bytes)
-
-
 @contextlib.contextmanager
-def atomic_path(target: str | os.PathLike, need_bytes: int = 0) -> Iterator[Path]:
+def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield an unused temporary path beside `target` (same suffix); rename it to `target` on success.
 
     On any exception (or Ctrl-C, SIGTERM, SIGHUP: see facegen.cli) the temporary file is removed, so no partial
-    output remains; a full disk becomes one FacegenError (`need_bytes`, when known, sizes its message).
+    output remains; a full disk becomes one FacegenError.
     """
     target = Path(target)
     check_writable(target)
@@ -149,7 +141,7 @@ def atomic_path(target: str | os.PathLike, need_bytes: int = 0) -> Iterator[Path
     try:
         fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=target.suffix, dir=folder)
     except OSError as exc:
-        full = disk_full_error(target, exc, need_bytes)
+        full = disk_full_error(target, exc)
         if full is not None:
             raise full from exc
         raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
@@ -165,7 +157,7 @@ def atomic_path(target: str | os.PathLike, need_bytes: int = 0) -> Iterator[Path
         written = tmp_path.stat().st_size if tmp_path.is_file() else 0
         tmp_path.unlink(missing_ok=True)
         if not isinstance(exc, FacegenError):
-            full = disk_full_error(target, exc, max(need_bytes, written))
+            full = disk_full_error(target, exc, written)
             if full is not None:
                 raise full from exc
         raise

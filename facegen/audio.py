@@ -35,7 +35,7 @@ class FeatureConfig:
 
     @property
     def hop_length(self) -> int:
-        hop = self.sample_rate / self.fps
+        hop = self.sample_rate / self.fps if self.fps > 0 else 0.5  # nan and <= 0 fps divide nothing
         if abs(hop - round(hop)) > 1e-9:
             raise FacegenError(f"fps {self.fps} does not divide the sample rate {self.sample_rate}: choose another fps")
         return round(hop)

@@ -63,8 +63,6 @@ def _one_of(**options) -> None:
         raise FacegenError(f"{names} cannot be used together: give only one source of words")
 
 
-
-
 class _FiniteRange(click.FloatRange):
     """A float range that also refuses nan and inf (click's FloatRange lets nan through)."""
 
@@ -125,15 +123,16 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
     from facegen.exchange import check_write_options, format_module, format_of, write_animation
-    from facegen.exchange.wav import is_same_file
+    from facegen.exchange.wav import is_same_file, sidecar_path
     from facegen.pipeline import animate as run
 
     _one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     format_module(output)  # an unknown extension or unwritable folder fails before any work
     check_writable(output)
-    if not is_same_file(audio, Path(output).with_suffix(".wav")):
-        check_writable(Path(output).with_suffix(".wav"))  # the sidecar WAV
-    _protect_inputs([output, Path(output).with_suffix(".wav"), preview], transcript=text_file,
+    sidecar = sidecar_path(output)
+    if not is_same_file(audio, sidecar):
+        check_writable(sidecar)
+    _protect_inputs([output, sidecar, preview], transcript=text_file,
                     alignment=alignment, model=model, template=template)
     options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig), ("morph_targets", morph_targets),
                                  ("tolerance", tolerance)) if v is not None}

@@ -57,18 +57,12 @@ def test_a_later_run_removes_only_dead_runs_temporaries(tmp_path):
 
 def test_disk_full_while_writing_is_one_line(tmp_path):
     target = tmp_path / "out.npy"
-    with pytest.raises(FacegenError) as info, atomic.atomic_path(target, need_bytes=5_000_000) as tmp:
-        tmp.write_bytes(b"x" * 100)
+    with pytest.raises(FacegenError) as info, atomic.atomic_path(target) as tmp:
+        tmp.write_bytes(b"x" * 3_000_000)
         raise OSError(errno.ENOSPC, "No space left on device")
     message = str(info.value)
-    assert message.startswith("no space left on ") and str(target) in message and "need about 5 MB" in message
+    assert message.startswith("no space left on ") and str(target) in message and "need about 3 MB" in message
     assert "\n" not in message and list(tmp_path.iterdir()) == []
-
-
-def test_check_space_refuses_before_work(tmp_path):
-    with pytest.raises(FacegenError, match="no space left on .* need about"):
-        atomic.check_space(tmp_path / "out.usdc", need_bytes=1 << 62)
-    atomic.check_space(tmp_path / "out.usdc", need_bytes=1)
 
 
 def _tmpfs(tmp_path: Path, size: str) -> Path:
