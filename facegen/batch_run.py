@@ -17,9 +17,10 @@ from pathlib import Path
 from facegen.batch import Job, JobResult, read_manifest
 from facegen.batch_plan import RunState, check_plan, file_hash, item_key
 from facegen.batch_report import summary_line, write_reports
-from facegen.engines import ENGINES, check_ray, cores, run_local, run_ray
+from facegen.engines import ENGINES, check_ray, run_local, run_ray
 from facegen.errors import FacegenError
 from facegen.exchange import format_of
+from facegen.runtime import cores
 
 SAVE_EVERY = 5.0  # seconds between saves of the run state while items finish
 

@@ -10,7 +10,6 @@ mounted at the same path on every node). Ray is an optional extra: `pip install 
 
 from __future__ import annotations
 
-import os
 import socket
 import sys
 from collections.abc import Callable, Sequence
@@ -19,17 +18,10 @@ from concurrent.futures.process import BrokenProcessPool
 
 from facegen.batch import Job, JobResult, run_batch
 from facegen.errors import FacegenError
+from facegen.runtime import cores
 
 ENGINES = ("local", "ray")
 OnResult = Callable[[JobResult], None]
-
-
-def cores() -> int:
-    """The CPU cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # macOS, Windows
-        return os.cpu_count() or 1
 
 
 class Worker:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from facegen.align_ahead import AlignAhead
 from facegen.animation import Animation
 from facegen.audio import check_speech, load_audio, mel_features, num_frames
 from facegen.bundle import Bundle, load_bundle
@@ -30,8 +31,10 @@ def get_words(
     alignment: str | os.PathLike | None = None,
     progress: Say = silent,
     warn: Say = silent,
+    ahead: AlignAhead | None = None,
 ) -> tuple[list, str]:
-    """Word timings for the clip and where they came from (alignment file, forced alignment, recognition)."""
+    """Word timings for the clip and where they came from (alignment file, forced alignment, recognition);
+    `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py)."""
     from facegen import align
     from facegen.words import read_alignment
 
@@ -42,7 +45,7 @@ def get_words(
         if not text.strip():
             raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
         progress("aligning the transcript to the speech (pocketsphinx)")
-        return align.align(samples, sr, text), "forced alignment"
+        return _forced(samples, sr, text, ahead, with_phones=False)[0], "forced alignment"
     warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a transcript; "
          "pass --text, --text-file or --alignment for better upper-face motion)")
     return align.recognize(samples, sr), "speech recognition"
@@ -89,8 +92,10 @@ def prepare_clip(
     text_model: str | None = None,
     progress: Say = silent,
     warn: Say = silent,
+    ahead: AlignAhead | None = None,
 ) -> Clip:
-    """Everything before the network: audio, word timings, text and audio features (see `animate`)."""
+    """Everything before the network: audio, word timings, text and audio features (see `animate`);
+    `ahead`: the forced alignment of `text` already running in a process of its own (align_ahead.py)."""
     spk = bundle.speaker_index(speaker)
     mesh = resolve_template(bundle, template)
     with PROFILE.stage("audio"):
@@ -100,6 +105,8 @@ def prepare_clip(
     T = num_frames(len(samples) / sr, cfg.fps)
     if len(samples) / sr < LONG_INPUT_SECONDS:
         progress = silent
+    with PROFILE.stage("audio_features"):  # before the words: done while an alignment started ahead runs
+        mel = mel_features(samples, sr, cfg, bundle.mel_filters)
 
     words: list = []
     source = "none (--no-text)"
@@ -107,12 +114,12 @@ def prepare_clip(
     if bundle.config.n_phones:
         with PROFILE.stage("alignment"):
             words, source, phone_feats = _words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,
-                                                           no_text=no_text, warn=warn)
+                                                           no_text=no_text, warn=warn, ahead=ahead)
     if bundle.config.uses_text and not no_text:
         if not bundle.config.n_phones:
             with PROFILE.stage("alignment"):
                 words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress,
-                                          warn=warn)
+                                          warn=warn, ahead=ahead)
         from facegen.text import check_text_dim, load_text_backend, text_features
 
         progress(f"text features ({bundle.text_backend}) for {len(words)} words")
@@ -122,14 +129,27 @@ def prepare_clip(
         with PROFILE.stage("text_features"):
             text_feats = text_features(words, backend, T, cfg.fps)
 
-    progress(f"audio features and inference for {T} frames")
-    with PROFILE.stage("audio_features"):
-        mel = mel_features(samples, sr, cfg, bundle.mel_filters)
+    progress(f"inference for {T} frames")
     return Clip(Path(audio).name, samples, sr, mel, text_feats, words, source, spk, mesh, phone_feats)
 
 
+def _forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | None,
+            with_phones: bool) -> tuple[list, list | None]:
+    """Forced alignment of `text` (words, and phones if `with_phones`): the answer of the process started
+    ahead, else aligned here (also when that process gave no answer)."""
+    from facegen import align
+
+    found = ahead.result() if ahead is not None else None
+    if found is not None:
+        return found
+    if with_phones:
+        return align.align_phones(samples, sr, text)
+    return align.align(samples, sr, text), None
+
+
 def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
-                      alignment, no_text: bool, warn: Say) -> tuple[list, str, np.ndarray]:
+                      alignment, no_text: bool, warn: Say,
+                      ahead: AlignAhead | None = None) -> tuple[list, str, np.ndarray]:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
     --no-text, which only drops the text features) the phone alignment of the recognised words."""
@@ -144,11 +164,9 @@ def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float,
                                "`facegen align --phones`, or pass --text")
         return words, "alignment file", phone_frames(phones, num_frames, fps)
     if text is not None and not no_text:
-        from facegen.align import align_phones
-
         if not text.strip():
             raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
-        words, phones = align_phones(samples, sr, text)
+        words, phones = _forced(samples, sr, text, ahead, with_phones=True)
         return words, "forced alignment", phone_frames(phones, num_frames, fps)
     from facegen import align
 
@@ -216,15 +234,42 @@ def animate(
     always see.
     """
     PROFILE.mark("animate_start")
-    dev = select_device(device)  # an unusable explicit device fails before any work
-    if not isinstance(bundle, Bundle):
-        with PROFILE.stage("model_load"):
-            bundle = load_bundle(bundle)
-    clip = prepare_clip(audio, bundle=bundle, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
-                        template=template, text_model=text_model, progress=progress, warn=warn)
+    ahead = _start_ahead(audio, text, alignment, no_text, bundle)
+    try:
+        dev = select_device(device)  # an unusable explicit device fails before any work
+        if not isinstance(bundle, Bundle):
+            with PROFILE.stage("model_load"):
+                bundle = load_bundle(bundle)
+        clip = prepare_clip(audio, bundle=bundle, text=text, alignment=alignment, no_text=no_text,
+                            speaker=speaker, template=template, text_model=text_model, progress=progress,
+                            warn=warn, ahead=ahead)
+    finally:
+        if ahead is not None:
+            ahead.close()
     with PROFILE.stage("inference"):
         frames = predict_frames(bundle, clip.mel, clip.text_features, clip.speaker,
                                 template=clip.mesh.vertices, device=dev, phones=clip.phones)
         vertices = frames if stream else np.asarray(frames)
     PROFILE.mark("animate_end")
     return finish_animation(bundle, clip, vertices)
+
+
+def _start_ahead(audio, text: str | None, alignment, no_text: bool, bundle) -> AlignAhead | None:
+    """The forced alignment of `text` started in a process of its own while this one imports torch and loads
+    the model (align_ahead.py), when this clip will be force-aligned; else None."""
+    if text is None or alignment is not None or no_text or not text.strip() or not Path(audio).is_file():
+        return None
+    if isinstance(bundle, Bundle):  # loaded already, so torch is too: nothing to overlap
+        return None
+    from facegen.bundle import default_bundle_path, read_metadata
+
+    try:
+        config = read_metadata(bundle if bundle is not None else default_bundle_path())["model_config"]
+    except (FacegenError, KeyError, TypeError):
+        return None  # load_bundle says what is wrong
+    phones = bool(config.get("n_phones"))
+    if not phones and config.get("modalities", "both") == "audio":
+        return None  # an audio-only model without a phone stream aligns nothing
+    from facegen import align_ahead
+
+    return align_ahead.start(audio, text, with_phones=phones)

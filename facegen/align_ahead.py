@@ -1,0 +1,103 @@
+"""Forced alignment started ahead, in a process of its own, while the caller imports torch and loads the model.
+
+A new `facegen animate` spends its first second or more importing torch and loading the bundle, and as long
+again aligning the transcript: pocketsphinx holds the GIL, so a thread cannot overlap the two, but a forked
+process can, on the second core. `start` forks before torch is imported (the child never touches torch, so
+the fork is safe) and returns an `AlignAhead` whose `result()` gives what `align.align` / `align.align_phones`
+would have given in this process (the same code on the same audio: the same words and phones), or raises
+their FacegenError. A child that dies without an answer (killed, a bug) makes `result()` return None: the
+caller aligns in its own process, where any error shows as usual.
+
+`start` returns None, and the caller aligns in-process as before, where overlapping gains nothing or is not
+safe: torch already imported (a second call in a process, a batch worker), other threads running, no `fork`
+(Windows, macOS defaults), or a single core.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+
+from facegen.errors import FacegenError
+from facegen.runtime import PROFILE, cores
+
+
+class AlignAhead:
+    """The forked aligner of one clip: `result()` waits for it, `close()` stops it."""
+
+    def __init__(self, process, receiver) -> None:
+        self._process, self._receiver = process, receiver
+
+    def result(self) -> tuple[list, list | None] | None:
+        """(words, phones or None) as align gives them, None when the child gave no answer; raises the
+        child's FacegenError. The child's own alignment time is the profile's "alignment_in_parallel"."""
+        try:
+            answer = self._receiver.recv()
+        except (EOFError, OSError):
+            answer = None
+        finally:
+            self.close()
+        if answer is None:
+            return None
+        kind, *payload = answer
+        if kind == "error":
+            raise FacegenError(payload[0])
+        words, phones, seconds = payload
+        PROFILE.add("alignment_in_parallel", seconds)
+        return words, phones
+
+    def close(self) -> None:
+        """Stop the child if it still runs (the caller failed or was interrupted) and reap it."""
+        if self._process.is_alive():
+            self._process.kill()
+        self._process.join()
+        self._receiver.close()
+
+
+def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead | None:
+    """Fork a process aligning `text` to the audio file `audio` (with its phones if `with_phones`), or None
+    where that is not worth it or not safe (see the module docstring)."""
+    import multiprocessing
+
+    if ("torch" in sys.modules or threading.active_count() > 1 or not text.strip()
+            or "fork" not in multiprocessing.get_all_start_methods() or cores() < 2):
+        return None
+    context = multiprocessing.get_context("fork")
+    receiver, sender = context.Pipe(duplex=False)
+    process = context.Process(target=_child, args=(sender, str(audio), text, with_phones), daemon=True,
+                              name="facegen-align")
+    process.start()
+    sender.close()
+    return AlignAhead(process, receiver)
+
+
+def _child(sender, audio: str, text: str, with_phones: bool) -> None:
+    """In the forked process: align and send ("ok", words, phones, seconds) or ("error", message)."""
+    import signal
+
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):  # the parent decides: it kills this process when it stops
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    answer = None  # a bug leaves no answer: the parent aligns itself and reports it there
+    try:
+        from facegen import align
+        from facegen.audio import load_audio
+
+        samples, rate = load_audio(audio)
+        start = time.perf_counter()
+        if with_phones:
+            words, phones = align.align_phones(samples, rate, text)
+        else:
+            words, phones = align.align(samples, rate, text), None
+        answer = ("ok", words, phones, time.perf_counter() - start)
+    except FacegenError as exc:
+        answer = ("error", str(exc))
+    except Exception:  # noqa: BLE001, S110 - no traceback here: the parent's own alignment shows it
+        pass
+    try:
+        if answer is not None:
+            sender.send(answer)
+    finally:
+        sender.close()
