@@ -39,7 +39,7 @@ def run_once(tree: Path, wav: Path, txt: Path, out: Path) -> dict:
                    if line.startswith('{"facegen_profile"'))
     stages = {"start-up": profile["marks"]["animate_start"] - start, **profile["facegen_profile"]}
     stages["exit"] = start + wall - profile["exit"]
-    stages["other"] = wall - sum(stages.values())
+    stages["other"] = wall - sum(v for k, v in stages.items() if not k.endswith("_in_parallel"))  # those overlap
     said = [line for line in proc.stderr.splitlines() if not line.startswith("{")]
     return {"wall": wall, "stages": stages, "heavy": profile.get("heavy_modules", []), "said": said}
 

@@ -200,7 +200,8 @@ def stages_of(run: dict) -> dict:
     marks = prof.get("marks", {})
     if "animate_start" in marks:
         stages["start-up"] = marks["animate_start"] - run["start"]
-    stages["exit"] = run["wall"] - sum(stages.values())  # the rest: mostly interpreter teardown at exit
+    # the rest: mostly interpreter teardown at exit ("alignment_in_parallel" ran in another process, beside these)
+    stages["exit"] = run["wall"] - sum(v for k, v in stages.items() if not k.endswith("_in_parallel"))
     return stages
 
 
