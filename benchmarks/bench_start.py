@@ -31,7 +31,8 @@ def run_once(tree: Path, wav: Path, txt: Path, out: Path) -> dict:
     env = {**os.environ, "PYTHONPATH": str(tree), "FACEGEN_PROFILE": "1", "HF_HUB_OFFLINE": "1"}
     start = time.time()
     proc = subprocess.run([sys.executable, "-m", "facegen", "animate", str(wav), "--text-file", str(txt),
-                           "-o", str(out)], capture_output=True, text=True, env=env, timeout=600, check=False)
+                           "-o", str(out)], capture_output=True, text=True, env=env, cwd=tree, timeout=600,
+                          check=False)  # cwd: with -m, the current folder comes first on sys.path
     wall = time.time() - start
     if proc.returncode != 0:
         raise SystemExit(f"facegen animate failed ({proc.returncode}) from {tree}:\n{proc.stderr[-2000:]}")
