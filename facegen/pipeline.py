@@ -232,6 +232,9 @@ def animate(
     reads them (bounded memory for long clips); otherwise a [T, V, 3] float32 array.
     `progress` receives stage messages for long clips (>= 20 s), `warn` receives notes the user should
     always see.
+    In a process that has not imported torch yet (a new `facegen animate`, a script's first call), the forced
+    alignment of `text` runs in a forked process while this one imports torch and loads the model
+    (align_ahead.py): the same result, sooner.
     """
     PROFILE.mark("animate_start")
     ahead = _start_ahead(audio, text, alignment, no_text, bundle)
