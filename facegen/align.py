@@ -52,7 +52,7 @@ _ALIGN = {"lm": None, "bestpath": False, "cmn": "live"}
 # of an alignment always come from every frame.
 _CONFIGS = {
     "align": _ALIGN,
-    "free": {**_ALIGN, "ds": 2},
+    "align-free": {**_ALIGN, "ds": 2},
     "align-wide": {**_ALIGN, **_WIDE},
     "align-nofiller": {**_ALIGN, "fsgusefiller": False, **_WIDE},
     "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False, "ds": 10},  # only its features count
@@ -73,7 +73,7 @@ def _decoder(kind: str):
 
         try:
             decoder = pocketsphinx.Decoder(samprate=RATE, loglevel="FATAL", **_CONFIGS[kind])
-            if kind.startswith("align") or kind == "free":
+            if kind.startswith("align"):
                 for phone, word in _PHONE_WORD.items():
                     decoder.add_word(word, phone, False)
                 decoder.add_allphone_file("_phones", None)  # also refreshes the dictionary
@@ -214,7 +214,7 @@ def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.n
       for the right one (13 at most down to 10 dB SNR). A typo or a swapped word passes, as it should.
     End to end on those 48 clips: every matching transcript passes; 46/48 wrong sentences and 47/48
     half transcripts are refused (the misses are at 10 and 5 dB SNR).
-    The free loop now scores every other frame (the "free" decoder, ds=2), which lowers the excess by about
+    The free loop now scores every other frame (the "align-free" decoder, ds=2), which lowers the excess by about
     6, so the bound went from 22 to 20. Measured on 20 sentences of the voices benchmark (Flite, Festival,
     espeak-ng) clean, at 10 and at 5 dB SNR: matching transcripts -13 to 19 (ds=1 and 22: three of the 5 dB
     clips were refused), other sentences that still align 22-62 clean, 5-49 at 10 dB, 12-43 at 5 dB:
@@ -300,7 +300,7 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
                     phones += _phones(alignment, len(kept), start, duration)
                 if p in chosen:
                     gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[:n]
-                    piece_free = _free_gaps(_decoder("free"), part, decoder.n_frames(), cmn)
+                    piece_free = _free_gaps(_decoder("align-free"), part, decoder.n_frames(), cmn)
                     free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
             words += [(w, a + start, b + start) for w, a, b in kept]
             start, p = end, p + 1

@@ -260,19 +260,17 @@ def animate(
 def _start_ahead(audio, text: str | None, alignment, no_text: bool, bundle) -> AlignAhead | None:
     """The forced alignment of `text` started in a process of its own while this one imports torch and loads
     the model (align_ahead.py), when this clip will be force-aligned; else None."""
-    if text is None or alignment is not None or no_text or not text.strip() or not Path(audio).is_file():
+    if text is None or alignment is not None or no_text or not Path(audio).is_file():
         return None
     if isinstance(bundle, Bundle):  # loaded already, so torch is too: nothing to overlap
         return None
     from facegen.bundle import default_bundle_path, read_metadata
 
-    try:
-        config = read_metadata(bundle if bundle is not None else default_bundle_path())["model_config"]
-    except (FacegenError, KeyError, TypeError):
+    try:  # the header only (model.ModelConfig imports torch); an audio-only model just never asks for the words
+        phones = bool(read_metadata(bundle if bundle is not None else default_bundle_path())["model_config"]
+                      .get("n_phones"))
+    except (FacegenError, KeyError, TypeError, AttributeError):
         return None  # load_bundle says what is wrong
-    phones = bool(config.get("n_phones"))
-    if not phones and config.get("modalities", "both") == "audio":
-        return None  # an audio-only model without a phone stream aligns nothing
     from facegen import align_ahead
 
     return align_ahead.start(audio, text, with_phones=phones)
