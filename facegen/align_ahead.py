@@ -11,6 +11,9 @@ caller aligns in its own process, where any error shows as usual.
 `start` returns None, and the caller aligns in-process as before, where overlapping gains nothing or is not
 safe: torch already imported (a second call in a process, a batch worker), other threads running, no `fork`
 (Windows, macOS defaults), or a single core.
+
+`align_file` aligns in the calling process and returns an `Aligned`, which answers `result()` the same way:
+a batch's main process aligns waiting items with it while its workers start (engines.run_local).
 """
 
 from __future__ import annotations
@@ -19,9 +22,52 @@ import os
 import sys
 import threading
 import time
+from dataclasses import dataclass
 
 from facegen.errors import FacegenError
 from facegen.runtime import PROFILE, cores
+
+
+@dataclass
+class Aligned:
+    """A forced alignment done already: the words and phones (None without), or the FacegenError's message;
+    `seconds` and `cpu_seconds` it took where it ran."""
+
+    words: list | None = None
+    phones: list | None = None
+    error: str | None = None
+    seconds: float = 0.0
+    cpu_seconds: float = 0.0
+
+    def result(self) -> tuple[list, list | None]:
+        """(words, phones or None) as align gives them; raises its FacegenError."""
+        if self.error is not None:
+            raise FacegenError(self.error)
+        PROFILE.add("alignment_in_parallel", self.seconds)
+        return self.words, self.phones
+
+    def close(self) -> None:
+        """Nothing runs: nothing to stop."""
+
+
+def align_file(audio: str | os.PathLike, text: str, with_phones: bool) -> Aligned:
+    """Align `text` to the audio file `audio` here (with its phones if `with_phones`), as the clip's own
+    animation would: read with load_audio, aligned by align.align / align.align_phones."""
+    from facegen import align
+    from facegen.audio import load_audio
+
+    start, cpu = time.perf_counter(), time.process_time()
+    try:
+        samples, rate = load_audio(audio)
+        if with_phones:
+            words, phones = align.align_phones(samples, rate, text)
+        else:
+            words, phones = align.align(samples, rate, text), None
+        found = Aligned(words, phones)
+    except FacegenError as exc:
+        found = Aligned(error=str(exc))
+    found.seconds, found.cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
+    return found
 
 
 class AlignAhead:
@@ -39,14 +85,7 @@ class AlignAhead:
             answer = None
         finally:
             self.close()
-        if answer is None:
-            return None
-        kind, *payload = answer
-        if kind == "error":
-            raise FacegenError(payload[0])
-        words, phones, seconds = payload
-        PROFILE.add("alignment_in_parallel", seconds)
-        return words, phones
+        return None if answer is None else answer.result()
 
     def close(self) -> None:
         """Stop the child if it still runs (the caller failed or was interrupted) and reap it."""
@@ -74,7 +113,7 @@ def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead 
 
 
 def _child(sender, audio: str, text: str, with_phones: bool) -> None:
-    """In the forked process: align and send ("ok", words, phones, seconds) or ("error", message)."""
+    """In the forked process: align and send the Aligned (its words, phones or error)."""
     import signal
 
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):  # the parent decides: it kills this process when it stops
@@ -82,18 +121,7 @@ def _child(sender, audio: str, text: str, with_phones: bool) -> None:
             signal.signal(getattr(signal, name), signal.SIG_DFL)
     answer = None  # a bug leaves no answer: the parent aligns itself and reports it there
     try:
-        from facegen import align
-        from facegen.audio import load_audio
-
-        samples, rate = load_audio(audio)
-        start = time.perf_counter()
-        if with_phones:
-            words, phones = align.align_phones(samples, rate, text)
-        else:
-            words, phones = align.align(samples, rate, text), None
-        answer = ("ok", words, phones, time.perf_counter() - start)
-    except FacegenError as exc:
-        answer = ("error", str(exc))
+        answer = align_file(audio, text, with_phones)
     except Exception:  # noqa: BLE001, S110 - no traceback here: the parent's own alignment shows it
         pass
     try:

@@ -31,7 +31,9 @@ class Job:
 
     `outputs` (when given) are the files to write from the one inference, `output` first; `line` is the
     manifest line the job comes from (0: not from a manifest); `problem` is why the row cannot run (e.g. an
-    unreadable transcript file), reported as its error without stopping the others."""
+    unreadable transcript file), reported as its error without stopping the others; `aligned` is the forced
+    alignment of `text` when it was done already (align_ahead.Aligned: engines.run_local's main process aligns
+    waiting items while its workers start), else the worker aligns."""
 
     audio: Path
     output: Path
@@ -42,6 +44,7 @@ class Job:
     line: int = 0
     outputs: tuple[Path, ...] = ()
     problem: str | None = None
+    aligned: object | None = None
 
     @property
     def targets(self) -> tuple[Path, ...]:
@@ -295,12 +298,14 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
                     raise FacegenError(job.problem)
                 prepared[i] = prepare_clip(job.audio, bundle=bundle, text=job.text, alignment=job.alignment,
                                            no_text=job.no_text, speaker=job.speaker, text_model=text_model,
-                                           warn=note)
+                                           warn=note, ahead=job.aligned)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error
                 prepared[i] = FacegenError(one_line(exc))
             seconds[i] = _clocks() - t0
+            if job.aligned is not None:  # aligned in another process: its time is this job's too
+                seconds[i] += [job.aligned.seconds, job.aligned.cpu_seconds]
         ready = sorted((i for i, c in prepared.items() if not isinstance(c, FacegenError)),
                        key=lambda i: prepared[i].num_frames)
         for b in range(0, len(ready), batch_size):

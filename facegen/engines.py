@@ -16,11 +16,17 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
+from facegen.align_ahead import align_file
 from facegen.batch import Job, JobResult, run_batch
 from facegen.errors import FacegenError
 from facegen.runtime import cores
 
 ENGINES = ("local", "ray")
+# What the local engine's worker processes import before they are forked (once, not in every worker): torch,
+# USD, pocketsphinx, the text model's code and the pipeline around them.
+PRELOAD = ["torch", "pxr.Usd", "pxr.UsdGeom", "pxr.UsdSkel", "pxr.UsdShade", "pxr.UsdMedia", "pocketsphinx",
+           "safetensors.torch", "tokenizers", "facegen.engines", "facegen.pipeline", "facegen.align",
+           "facegen.minilm", "facegen.text", "facegen.exchange.usd", "facegen.validate"]
 OnResult = Callable[[JobResult], None]
 
 
@@ -28,11 +34,9 @@ class Worker:
     """The model and text model loaded once, and the chunks run with them."""
 
     def __init__(self, model: str | None, device: str, text_model: str | None, threads: int) -> None:
-        import torch
-
+        limit_threads(threads)
         from facegen.bundle import load_bundle
 
-        torch.set_num_threads(max(1, threads))
         self.bundle = load_bundle(model)
         self.device, self.text_model = device, text_model
         if self.bundle.config.uses_text:
@@ -43,6 +47,20 @@ class Worker:
     def run(self, jobs: Sequence[Job], batch_size: int) -> list[JobResult]:
         return run_batch(jobs, bundle=self.bundle, device=self.device, text_model=self.text_model,
                          batch_size=batch_size)
+
+
+def limit_threads(threads: int) -> None:
+    """At most `threads` threads in each pool this process computes with: torch's, the BLAS and OpenMP pools
+    (threadpoolctl) and USD's (pxr.Work). With a worker per core, a second thread only spins: 20 clips in one
+    process took the same wall time with one thread per pool and 22 % less CPU, which the other worker gets."""
+    import torch
+    from pxr import Work
+    from threadpoolctl import threadpool_limits
+
+    threads = max(1, threads)
+    torch.set_num_threads(threads)
+    threadpool_limits(threads)
+    Work.SetConcurrencyLimit(threads)
 
 
 _worker: Worker | None = None  # the local engine's worker of this process (set by the pool's initializer)
@@ -75,7 +93,12 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
               batch_size: int, on_result: OnResult) -> None:
     """Run `jobs` in `workers` processes (in this process when 1), each loading the model once; every result
     goes to `on_result` as it comes. A worker process that dies makes its unfinished items errors (a new
-    run redoes only them)."""
+    run redoes only them).
+
+    The chunks go to the workers as they become free; meanwhile this process force-aligns the items of the
+    last waiting chunks (align_ahead.align_file, the same words and phones a worker would find). It imports no
+    torch, so it starts at once, while the workers import torch and load the model: a core that would idle
+    for the first second or two aligns instead (20 clips on 2 cores: see docs/scale.md)."""
     threads = max(1, cores() // workers)
     if workers == 1:
         worker = Worker(model, device, text_model, threads)
@@ -87,13 +110,24 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
 
     context = multiprocessing.get_context("forkserver" if sys.platform.startswith("linux") else "spawn")
     if context.get_start_method() == "forkserver":
-        context.set_forkserver_preload(["facegen.engines", "facegen.pipeline"])  # forked with torch imported
+        context.set_forkserver_preload(PRELOAD)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_local,
                                initargs=(model, device, text_model, threads))
+    queue = chunks(jobs, workers, batch_size)
+    to_align = _alignable(queue, model)
+    pending: dict = {}
     try:
-        pending = {pool.submit(_run_local, chunk, batch_size): chunk for chunk in chunks(jobs, workers, batch_size)}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        while queue or pending:
+            while queue and len(pending) <= workers:  # every worker busy, and one chunk ready to start
+                chunk = queue.pop(0)
+                pending[pool.submit(_run_local, chunk, batch_size)] = chunk
+            in_queue = {id(job) for chunk in queue for job in chunk}
+            while to_align and id(to_align[-1][0]) not in in_queue:
+                to_align.pop()  # its chunk left for a worker: the worker aligns it
+            if to_align:
+                job, phones = to_align.pop()
+                job.aligned = align_file(job.audio, job.text, phones)
+            done, _ = wait(pending, timeout=0 if to_align else None, return_when=FIRST_COMPLETED)
             for future in done:
                 chunk = pending.pop(future)
                 try:
@@ -108,6 +142,19 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[Job, bool]]:
+    """The waiting jobs this process can force-align, in queue order (taken from the end), with whether the model
+    needs their phones too: those with a transcript and no alignment file, of a model whose header reads."""
+    from facegen.pipeline import aligns_phones
+
+    phones = aligns_phones(model)
+    if phones is None:
+        return []
+    return [(job, phones) for chunk in queue for job in chunk
+            if job.text is not None and job.text.strip() and job.alignment is None and not job.no_text
+            and not job.problem]
 
 
 def _stop_workers(pool: ProcessPoolExecutor, grace: float = 5.0) -> None:

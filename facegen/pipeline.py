@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facegen.align_ahead import AlignAhead
+from facegen.align_ahead import AlignAhead, Aligned
 from facegen.animation import Animation
 from facegen.audio import check_speech, load_audio, mel_features, num_frames
 from facegen.bundle import Bundle, load_bundle
@@ -31,7 +31,7 @@ def get_words(
     alignment: str | os.PathLike | None = None,
     progress: Say = silent,
     warn: Say = silent,
-    ahead: AlignAhead | None = None,
+    ahead: AlignAhead | Aligned | None = None,
 ) -> tuple[list, str]:
     """Word timings for the clip and where they came from (alignment file, forced alignment, recognition);
     `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py)."""
@@ -92,10 +92,10 @@ def prepare_clip(
     text_model: str | None = None,
     progress: Say = silent,
     warn: Say = silent,
-    ahead: AlignAhead | None = None,
+    ahead: AlignAhead | Aligned | None = None,
 ) -> Clip:
     """Everything before the network: audio, word timings, text and audio features (see `animate`);
-    `ahead`: the forced alignment of `text` already running in a process of its own (align_ahead.py)."""
+    `ahead`: the forced alignment of `text` already running in a process of its own, or done (align_ahead.py)."""
     spk = bundle.speaker_index(speaker)
     mesh = resolve_template(bundle, template)
     with PROFILE.stage("audio"):
@@ -133,7 +133,7 @@ def prepare_clip(
     return Clip(Path(audio).name, samples, sr, mel, text_feats, words, source, spk, mesh, phone_feats)
 
 
-def _forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | None,
+def _forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None,
             with_phones: bool) -> tuple[list, list | None]:
     """Forced alignment of `text` (words, and phones if `with_phones`): the answer of the process started
     ahead, else aligned here (also when that process gave no answer)."""
@@ -149,7 +149,7 @@ def _forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | None,
 
 def _words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
                       alignment, no_text: bool, warn: Say,
-                      ahead: AlignAhead | None = None) -> tuple[list, str, np.ndarray]:
+                      ahead: AlignAhead | Aligned | None = None) -> tuple[list, str, np.ndarray]:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
     --no-text, which only drops the text features) the phone alignment of the recognised words."""
@@ -264,13 +264,22 @@ def _start_ahead(audio, text: str | None, alignment, no_text: bool, bundle) -> A
         return None
     if isinstance(bundle, Bundle):  # loaded already, so torch is too: nothing to overlap
         return None
-    from facegen.bundle import default_bundle_path, read_metadata
-
-    try:  # the header only (model.ModelConfig imports torch); an audio-only model just never asks for the words
-        phones = bool(read_metadata(bundle if bundle is not None else default_bundle_path())["model_config"]
-                      .get("n_phones"))
-    except (FacegenError, KeyError, TypeError, AttributeError):
-        return None  # load_bundle says what is wrong
+    phones = aligns_phones(bundle)
+    if phones is None:
+        return None
     from facegen import align_ahead
 
     return align_ahead.start(audio, text, with_phones=phones)
+
+
+def aligns_phones(model: str | os.PathLike | None) -> bool | None:
+    """Whether the model bundle at `model` (None: the built-in one) aligns phones as well as words, read from
+    its header only (no torch); None when the header cannot be read (load_bundle will say what is wrong).
+    An audio-only model just never asks for the words."""
+    from facegen.bundle import default_bundle_path, read_metadata
+
+    try:  # model.ModelConfig imports torch
+        return bool(read_metadata(model if model is not None else default_bundle_path())["model_config"]
+                    .get("n_phones"))
+    except (FacegenError, KeyError, TypeError, AttributeError):
+        return None
