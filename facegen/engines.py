@@ -146,13 +146,13 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
 
 def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[Job, bool]]:
     """The waiting jobs this process can force-align, in queue order (taken from the end), with whether the model
-    needs their phones too: those with a transcript and no alignment file, of a model whose header reads."""
-    from facegen.pipeline import aligns_phones
+    needs their phones too: those with a transcript and no alignment file, when the model uses the words."""
+    from facegen.pipeline import forced_alignment_of
 
-    phones = aligns_phones(model)
-    if phones is None:
+    needs = forced_alignment_of(model)
+    if needs is None:
         return []
-    return [(job, phones) for chunk in queue for job in chunk
+    return [(job, needs == "phones") for chunk in queue for job in chunk
             if job.text is not None and job.text.strip() and job.alignment is None and not job.no_text
             and not job.problem]
 

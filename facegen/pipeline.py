@@ -264,22 +264,24 @@ def _start_ahead(audio, text: str | None, alignment, no_text: bool, bundle) -> A
         return None
     if isinstance(bundle, Bundle):  # loaded already, so torch is too: nothing to overlap
         return None
-    phones = aligns_phones(bundle)
-    if phones is None:
+    needs = forced_alignment_of(bundle)
+    if needs is None:
         return None
     from facegen import align_ahead
 
-    return align_ahead.start(audio, text, with_phones=phones)
+    return align_ahead.start(audio, text, with_phones=needs == "phones")
 
 
-def aligns_phones(model: str | os.PathLike | None) -> bool | None:
-    """Whether the model bundle at `model` (None: the built-in one) aligns phones as well as words, read from
-    its header only (no torch); None when the header cannot be read (load_bundle will say what is wrong).
-    An audio-only model just never asks for the words."""
+def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
+    """What the model bundle at `model` (None: the built-in one) needs from a transcript's forced alignment:
+    "phones" (words and phones), "words", or None (an audio-only model, or a header that cannot be read:
+    load_bundle will say what is wrong). Read from the header only: model.ModelConfig imports torch."""
     from facegen.bundle import default_bundle_path, read_metadata
 
-    try:  # model.ModelConfig imports torch
-        return bool(read_metadata(model if model is not None else default_bundle_path())["model_config"]
-                    .get("n_phones"))
+    try:
+        config = read_metadata(model if model is not None else default_bundle_path())["model_config"]
+        if config.get("n_phones"):
+            return "phones"
+        return "words" if config.get("modalities", "both") in ("both", "text") else None
     except (FacegenError, KeyError, TypeError, AttributeError):
         return None

@@ -123,3 +123,20 @@ def test_no_fork_where_it_gains_nothing_or_is_unsafe(monkeypatch):
     assert align_ahead.start(WAV, "   ", with_phones=True) is None
     monkeypatch.setattr(align_ahead, "cores", lambda: 1)
     assert align_ahead.start(WAV, TEXT, with_phones=True) is None
+
+
+def test_align_file_answers_as_the_forked_aligner_does():
+    """align_file (the batch's main process aligning waiting items): align_phones' words and phones, or its
+    FacegenError raised by result(), with the time it took."""
+    from facegen.align import align, align_phones
+
+    done = align_ahead.align_file(WAV, TEXT, with_phones=True)
+    assert done.result() == align_phones(*load_audio(WAV), TEXT) and done.error is None
+    assert 0 < done.cpu_seconds and 0 < done.seconds
+    wrong = "Seven purple elephants were dancing slowly across the frozen river."
+    failed = align_ahead.align_file(WAV, wrong, with_phones=False)
+    with pytest.raises(FacegenError) as here:
+        align(*load_audio(WAV), wrong)
+    assert failed.error == str(here.value) and failed.words is None
+    with pytest.raises(FacegenError, match="does not match the speech"):
+        failed.result()

@@ -3,6 +3,7 @@ several formats from one inference, validation per item, skipping unchanged item
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import subprocess
@@ -197,6 +198,31 @@ def test_batch_in_worker_processes_writes_validates_reports_and_skips(speech, mo
     assert sorted(state["items"]) == ["a/s0.npy", "s1.npy", "s2.npy"]
 
 
+def test_the_main_process_aligns_waiting_items_as_a_worker_would(speech, tmp_path):
+    """With transcripts, the main process force-aligns the last waiting items while the workers start: their
+    files equal the library's run in this process, and a wrong transcript is that item's error, the same line."""
+    from facegen.batch import one_line
+    from facegen.pipeline import animate
+
+    wrong = "Seven purple elephants were dancing slowly across the frozen river."
+    rows = [(f"s{i}.wav", SENTENCES[i]) for i in (0, 1, 2, 0)] + [("s2.wav", wrong)]
+    manifest = speech / "texts.csv"
+    with open(manifest, "w", newline="") as f:
+        csv.writer(f).writerows([("audio", "text", "output")] + [(a, t, f"{n}-{a[:2]}.npy")
+                                                                  for n, (a, t) in enumerate(rows)])
+    outcome = run_manifest(manifest, tmp_path / "out", jobs=2, device="cpu")  # the default model: words and phones
+    assert [r.status for r in outcome.results] == ["passed"] * 4 + ["error"]
+    last = outcome.results[-1]
+    assert last.job.aligned is not None  # the last chunk waits until a worker is free: the main process aligned it
+    assert last.seconds >= last.job.aligned.seconds > 0
+    with pytest.raises(FacegenError) as here:
+        animate(speech / "s2.wav", text=wrong, device="cpu")
+    assert last.error == one_line(here.value)
+    for r in outcome.results[:4]:
+        alone = animate(r.job.audio, text=r.job.text, device="cpu")
+        assert np.abs(np.load(r.job.output).reshape(alone.vertices.shape) - alone.vertices).max() < 1e-5
+
+
 def test_failed_validation_is_a_junit_failure_and_exit_1(speech, tmp_path):
     """A model that throws the face far beyond the rest pose: written, but `validate` fails it."""
     wild = tmp_path / "wild.safetensors"
@@ -213,3 +239,21 @@ def test_failed_validation_is_a_junit_failure_and_exit_1(speech, tmp_path):
     assert failure is not None and failure.get("type") == "validation" and "s0.npy" in failure.get("message")
     assert (out / "s0.npy").is_file()  # the file is kept for inspection; the state does not count it as done
     assert "s0.npy" not in json.loads((out / STATE_NAME).read_text())["items"]
+
+
+def test_a_worker_limits_every_thread_pool_it_computes_with():
+    import torch
+    from pxr import Work
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from facegen.engines import limit_threads
+
+    before = torch.get_num_threads(), Work.GetConcurrencyLimit()
+    try:
+        with threadpool_limits():  # restores the BLAS and OpenMP pools afterwards
+            limit_threads(1)
+            assert torch.get_num_threads() == 1 and Work.GetConcurrencyLimit() == 1
+            assert {pool["num_threads"] for pool in threadpool_info()} == {1}
+    finally:
+        torch.set_num_threads(before[0])
+        Work.SetConcurrencyLimit(before[1])
