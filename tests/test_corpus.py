@@ -112,7 +112,10 @@ def test_lips_close_on_bilabials_and_open_on_vowels(small, f2):
             if vis == ("PBM",):
                 closed += list(gap[frames])
             elif vis[0] in VOWELS and vis[0] in ("AA", "AE", "EH") and p.end - p.start > 0.06:
-                opened += list(gap[frames])
+                # inside the vowel, 20 ms from its edges: libespeak-ng's phone times move by up to a pitch
+                # period (~10 ms) with state left by earlier calls, which puts a frame of the transition in
+                inner = np.nonzero((t >= p.start + 0.02) & (t <= p.end - 0.02))[0]
+                opened += list(gap[inner])
     assert len(closed) >= 6 and len(opened) >= 10
     assert max(closed) < 0.02  # cm: the lips meet
     assert np.median(opened) > 0.5 and min(opened) > 0.15  # cm: the mouth is open
