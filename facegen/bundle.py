@@ -193,7 +193,8 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
         raise FacegenError(f"model bundle {path} is corrupt or truncated ({exc}): re-download or re-train it") from exc
     try:
         cfg = ModelConfig.from_dict(meta["model_config"])
-        model = FaceModel(cfg)
+        with torch.device("meta"):  # no storage, no random init: the weights are assigned below (0.1 s less)
+            model = FaceModel(cfg)
         state = {k[len("model."):]: v for k, v in _decompress(tensors).items() if k.startswith("model.")}
         # a sum is NaN/inf when any weight is (20x cheaper than isfinite().all() on the start-up path)
         broken = sorted(k for k, v in state.items()
@@ -201,7 +202,7 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
         if broken:
             raise FacegenError(f"model bundle {path} has NaN or infinite weights ({', '.join(broken[:3])}"
                                f"{' ...' if len(broken) > 3 else ''}): re-train it (a lower --lr) or re-export it")
-        model.load_state_dict(state)
+        model.load_state_dict(state, assign=True)
         regions = {k[len("region."):]: v.numpy() for k, v in tensors.items() if k.startswith("region.")}
         template = Mesh(tensors["template.vertices"].numpy(), tensors["template.faces"].numpy(), regions)
         features = FeatureConfig.from_dict(meta["feature_config"])
