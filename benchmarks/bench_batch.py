@@ -6,9 +6,14 @@ Target (issue 13): >= 15x real time with `--jobs 2` over 20 sentences. The clips
 facegen.synth.voices (Flite, Festival and espeak-ng voices in turn; whichever are installed), one sentence of
 the synthetic corpus each, with its transcript in the manifest (forced alignment, as for recorded lines).
 Prints each configuration's wall seconds and real-time factor; `--compare 1` also runs `--jobs 1` (one worker,
-as `facegen batch` ran before) side by side, alternating, so that a busy machine slows both alike.
+as `facegen batch` ran before) side by side, alternating, so that a busy machine slows both alike; `--before TREE`
+runs another source tree's `facegen batch` (e.g. a git worktree of the previous release) side by side the same way.
+Each run writes into an empty folder, as a CI runner's first run does, and its outputs (about 35 MB of points
+per clip in .usdc) are deleted before the next run is timed: replacing them instead (`--force` over the last
+run) adds the file system's work of freeing them, 0.5-1 s for 20 clips on the development machine.
 
     python benchmarks/bench_batch.py [--clips 20] [--jobs 2] [--formats usdc] [--runs 1] [--compare 1]
+                                     [--before TREE]
 """
 
 from __future__ import annotations
@@ -54,16 +59,20 @@ def make_clips(folder: Path, count: int) -> float:
     return total
 
 
-def run_batch(folder: Path, jobs: int, formats: str) -> float:
-    """Wall seconds of one `facegen batch --force` (a new process: everything included)."""
-    out = folder / f"out-{jobs}"
+def run_batch(folder: Path, jobs: int, formats: str, tree: Path = REPO) -> float:
+    """Wall seconds of one `facegen batch` of `tree`'s code into an empty folder (a new process: everything
+    included); the outputs are deleted afterwards."""
+    out = folder / "out"
+    shutil.rmtree(out, ignore_errors=True)
     cmd = [sys.executable, "-m", "facegen", "batch", str(folder / "lines.csv"), "-o", str(out), "--jobs", str(jobs),
-           "--formats", formats, "--force", "-q"]
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+           "--formats", formats, "-q"]
+    env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=tree, check=False)
     seconds = time.perf_counter() - t0
-    print(f"  --jobs {jobs}: {seconds:.1f} s   {proc.stdout.strip()}", flush=True)
+    shutil.rmtree(out, ignore_errors=True)
+    shown = "" if tree == REPO else f" ({tree})"
+    print(f"  --jobs {jobs}{shown}: {seconds:.1f} s   {proc.stdout.strip()}", flush=True)
     if proc.returncode != 0:
         print(proc.stderr[-2000:], file=sys.stderr)
     return seconds
@@ -76,6 +85,7 @@ def main() -> None:
     parser.add_argument("--formats", default="usdc")
     parser.add_argument("--runs", type=int, default=1)
     parser.add_argument("--compare", type=int, default=None, help="also run --jobs N (e.g. 1) side by side")
+    parser.add_argument("--before", type=Path, help="also run this source tree's facegen batch side by side")
     parser.add_argument("--keep", help="a folder to keep the clips and outputs in (default: a temporary one)")
     args = parser.parse_args()
 
@@ -85,18 +95,21 @@ def main() -> None:
         print(f"making {args.clips} clips in {folder}", flush=True)
         audio = make_clips(folder, args.clips)
         print(f"{audio:.1f} s of speech; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
-        configs = [args.jobs] + ([args.compare] if args.compare else [])
-        times: dict[int, list[float]] = {j: [] for j in configs}
+        configs = [(args.jobs, REPO)] + ([(args.compare, REPO)] if args.compare else [])
+        configs += [(args.jobs, args.before.resolve())] if args.before else []
+        times: dict[tuple[int, Path], list[float]] = {c: [] for c in configs}
         for _ in range(args.runs):
-            for jobs in configs:
-                times[jobs].append(run_batch(folder, jobs, args.formats))
-        for jobs in configs:
-            med = statistics.median(times[jobs])
-            print(f"--jobs {jobs}: median {med:.1f} s over {len(times[jobs])} run(s) = {audio / med:.1f}x real time "
+            for jobs, tree in configs:
+                times[jobs, tree].append(run_batch(folder, jobs, args.formats, tree))
+        for (jobs, tree), runs in times.items():
+            med = statistics.median(runs)
+            shown = "" if tree == REPO else f" ({tree})"
+            print(f"--jobs {jobs}{shown}: median {med:.1f} s over {len(runs)} run(s) = {audio / med:.1f}x real time "
                   f"(target >= 15x on 2 cores)")
-        if args.compare:
-            ratio = statistics.median(times[args.compare]) / statistics.median(times[args.jobs])
-            print(f"--jobs {args.jobs} is {ratio:.2f}x faster than --jobs {args.compare}")
+        for other in configs[1:]:
+            ratio = statistics.median(times[other]) / statistics.median(times[configs[0]])
+            print(f"--jobs {args.jobs} is {ratio:.2f}x faster than --jobs {other[0]}"
+                  + ("" if other[1] == REPO else f" of {other[1]}"))
         print(f"load average after: {os.getloadavg()[0]:.2f}")
     finally:
         if not args.keep:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import socket
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -116,18 +117,23 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
     queue = chunks(jobs, workers, batch_size)
     to_align = _alignable(queue, model)
     pending: dict = {}
+    # The first submissions start the workers, which waits until the forkserver has imported torch: they are
+    # made from a thread, and this one aligns meanwhile.
+    first, queue[:workers + 1] = queue[:workers + 1], []
+    failed: list[BaseException] = []
+    starter = threading.Thread(target=_submit, args=(pool, first, batch_size, pending, failed), daemon=True)
+    starter.start()
     try:
+        while starter.is_alive() and _align_next(queue, to_align):
+            pass
+        starter.join()
+        if failed:
+            raise failed[0]
         while queue or pending:
             while queue and len(pending) <= workers:  # every worker busy, and one chunk ready to start
-                chunk = queue.pop(0)
-                pending[pool.submit(_run_local, chunk, batch_size)] = chunk
-            in_queue = {id(job) for chunk in queue for job in chunk}
-            while to_align and id(to_align[-1][0]) not in in_queue:
-                to_align.pop()  # its chunk left for a worker: the worker aligns it
-            if to_align:
-                job, phones = to_align.pop()
-                job.aligned = align_file(job.audio, job.text, phones)
-            done, _ = wait(pending, timeout=0 if to_align else None, return_when=FIRST_COMPLETED)
+                _submit(pool, [queue.pop(0)], batch_size, pending)
+            aligned = _align_next(queue, to_align)
+            done, _ = wait(pending, timeout=0 if aligned else None, return_when=FIRST_COMPLETED)
             for future in done:
                 chunk = pending.pop(future)
                 try:
@@ -138,10 +144,36 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
                 for result in results:
                     on_result(result)
     except BaseException:  # Ctrl-C, SIGTERM, an error in on_result: stop the workers now, not after their chunks
+        starter.join()  # its workers too
         _stop_workers(pool)
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _submit(pool: ProcessPoolExecutor, chunks_: list[list[Job]], batch_size: int, pending: dict,
+            failed: list[BaseException] | None = None) -> None:
+    """Submit each chunk to the pool, into `pending` (future -> chunk); an error goes to `failed` when given."""
+    try:
+        for chunk in chunks_:
+            pending[pool.submit(_run_local, chunk, batch_size)] = chunk
+    except BaseException as exc:
+        if failed is None:
+            raise
+        failed.append(exc)
+
+
+def _align_next(queue: list[list[Job]], to_align: list[tuple[Job, bool]]) -> bool:
+    """Force-align the last waiting job of `to_align` whose chunk is still in `queue` (the chunks left have gone to
+    the workers, which align their own); False when there is none."""
+    in_queue = {id(job) for chunk in queue for job in chunk}
+    while to_align and id(to_align[-1][0]) not in in_queue:
+        to_align.pop()
+    if not to_align:
+        return False
+    job, phones = to_align.pop()
+    job.aligned = align_file(job.audio, job.text, phones)
+    return True
 
 
 def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[Job, bool]]:
