@@ -212,6 +212,8 @@ def test_the_main_process_aligns_waiting_items_as_a_worker_would(speech, tmp_pat
                                                                   for n, (a, t) in enumerate(rows)])
     outcome = run_manifest(manifest, tmp_path / "out", jobs=2, device="cpu")  # the default model: words and phones
     assert [r.status for r in outcome.results] == ["passed"] * 4 + ["error"]
+    from multiprocessing import forkserver
+    assert forkserver._forkserver._forkserver_pid is None  # stopped at the end: its teardown would hold our pipes
     last = outcome.results[-1]
     assert last.job.aligned is not None  # the last chunk waits until a worker is free: the main process aligned it
     assert last.seconds >= last.job.aligned.seconds > 0
