@@ -385,8 +385,12 @@ class PointsFrames:
     def __len__(self) -> int:
         return len(self.times)
 
+    def value(self, i: int):
+        """Frame i as the stage gives it (a Vt.Vec3fArray), None where a value clip is missing."""
+        return self.attr.Get(self.times[i])
+
     def __getitem__(self, i: int) -> np.ndarray:
-        value = self.attr.Get(self.times[i])  # None where a value clip is missing
+        value = self.value(i)
         return np.asarray(value if value is not None else np.zeros((0, 3)), dtype=np.float32)
 
     def __iter__(self) -> Iterator[np.ndarray]:

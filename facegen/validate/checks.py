@@ -65,41 +65,56 @@ def check_values(
     if len(frames) == 0:
         report.add("finite", False, "no frames with the expected vertex count to check")
         return
-    rest = template.vertices if template is not None else own_rest if own_rest is not None else frames[0]
-    rest = np.asarray(rest, dtype=np.float32)
-    measured = np.isfinite(rest).all()
-    bad_frames, worst, worst_frame = [], 0.0, 0
-    for i, f in enumerate(frames):  # one pass: each frame read once (a USD frame is read from the file)
-        f = np.asarray(f, dtype=np.float32)
+    scan = ValueScan(template.vertices if template is not None else own_rest if own_rest is not None else frames[0])
+    for i, f in enumerate(frames):
+        scan.add(i, f)
+    scan.report(report, max_displacement)
+
+
+class ValueScan:
+    """finite + displacement measured one frame at a time (`add`, each frame read once: a USD frame is read from
+    the file), then reported (`report`); the frames have the vertex count of `rest`."""
+
+    def __init__(self, rest: np.ndarray) -> None:
+        self.rest = np.asarray(rest, dtype=np.float32)
+        self.measured = bool(np.isfinite(self.rest).all())
+        self.bad_frames: list[int] = []
+        self.worst, self.worst_frame = 0.0, 0
+
+    def add(self, i: int, frame: np.ndarray) -> None:
+        f = np.asarray(frame, dtype=np.float32)
         if not np.isfinite(f).all():
-            bad_frames.append(i)
-        if measured:
-            diff = f - rest
+            self.bad_frames.append(i)
+        if self.measured:
+            diff = f - self.rest
             with np.errstate(invalid="ignore", over="ignore"):
                 d2 = np.einsum("ij,ij->i", diff, diff)  # squared offsets (5x faster than sum(axis=1))
             d = float(np.sqrt(d2[np.isfinite(d2)].max(initial=0.0)))  # NaN/inf: the "finite" check's failure
-            if d > worst:
-                worst, worst_frame = d, i
-    report.add(
-        "finite",
-        not bad_frames,
-        "no NaN or infinite coordinates"
-        if not bad_frames
-        else f"{len(bad_frames)} frames have NaN/inf coordinates (first: frame {bad_frames[0]})",
-    )
-    if not measured:
-        report.add("displacement", False, "the rest pose has NaN/inf coordinates")
-        return
-    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
-    bound = max_displacement * size
-    share = f"{worst / size:.1%}" if size > 0 else "n/a"
-    unmeasured = f"; {len(bad_frames)} frames with NaN/inf coordinates could not be measured" if bad_frames else ""
-    report.add(
-        "displacement",
-        worst <= bound and not bad_frames,
-        f"largest vertex offset {worst:.4g} (frame {worst_frame}) = {share} of the face size "
-        f"{size:.4g}; bound {max_displacement:.0%}{unmeasured}",
-    )
+            if d > self.worst:
+                self.worst, self.worst_frame = d, i
+
+    def report(self, report: Report, max_displacement: float) -> None:
+        bad = self.bad_frames
+        report.add(
+            "finite",
+            not bad,
+            "no NaN or infinite coordinates" if not bad
+            else f"{len(bad)} frames have NaN/inf coordinates (first: frame {bad[0]})",
+        )
+        if not self.measured:
+            report.add("displacement", False, "the rest pose has NaN/inf coordinates")
+            return
+        rest, worst = self.rest, self.worst
+        size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+        bound = max_displacement * size
+        share = f"{worst / size:.1%}" if size > 0 else "n/a"
+        unmeasured = f"; {len(bad)} frames with NaN/inf coordinates could not be measured" if bad else ""
+        report.add(
+            "displacement",
+            worst <= bound and not bad,
+            f"largest vertex offset {worst:.4g} (frame {self.worst_frame}) = {share} of the face size "
+            f"{size:.4g}; bound {max_displacement:.0%}{unmeasured}",
+        )
 
 
 def read_audio(

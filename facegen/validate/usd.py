@@ -44,7 +44,14 @@ from facegen.errors import FacegenError
 from facegen.exchange import usd as usd_format
 from facegen.exchange import usd_skel
 from facegen.exchange import usdz as usdz_format
-from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
+from facegen.validate.checks import (
+    ValueScan,
+    check_duration,
+    check_faces,
+    check_values,
+    open_file,
+    read_audio,
+)
 from facegen.validate.report import Expected, Report
 from facegen.validate.rig import check_rig
 
@@ -80,7 +87,12 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     source = (
         "the template" if template is not None else "the file's rest pose" if rest is not None else "frame 0"
     )
-    lengths = [len(f) for f in frames]  # points: one pass reading each frame through the stage
+    scan = extent_problem = None
+    if blended:
+        lengths = [len(f) for f in frames]
+    else:  # one pass reading each frame through the stage: its length, its extent, its values
+        base = template.vertices if template is not None else own
+        lengths, scan, extent_problem = _scan_points(mesh, frames, base, count)
     counts = sorted(set(lengths))
     if len(frames) == 0:
         what = "blend shape frames" if blended else "points time samples"
@@ -120,8 +132,12 @@ def check(report: Report, path: Path, expected: Expected) -> None:
         )
     rate = file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS
 
-    _check_time_samples(report, stage, mesh, times, "blendShapeWeights" if blended else "points", frames)
-    check_values(report, frames if counts == [count] else [], own, template, expected.max_displacement)
+    _check_time_samples(report, stage, mesh, times, "blendShapeWeights" if blended else "points", frames,
+                        extent_problem)
+    if scan is not None and len(times) and counts == [count]:
+        scan.report(report, expected.max_displacement)
+    else:
+        check_values(report, frames if counts == [count] else [], own, template, expected.max_displacement)
 
     audio = None
     sound = usd_format.find_audio(stage)
@@ -241,12 +257,40 @@ def _check_clips(report: Report, mesh) -> None:
     report.add("clips", not problems, "; ".join(problems[:3]) or "; ".join(described) + ", all resolve")
 
 
-def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points",
-                        frames=()) -> None:
-    """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame; for
-    blend shapes, the extent at each time (sampled or not) bounding the blended `frames`."""
+def _scan_points(mesh, frames: usd_format.PointsFrames, rest: np.ndarray | None,
+                 count: int | None) -> tuple[list[int], ValueScan | None, str | None]:
+    """Each `points` sample read once: the vertex counts, finite + displacement against `rest` of the frames with
+    `count` vertices (a ValueScan, None without a rest pose), and the first problem of the extent samples (an
+    extent sample per frame bounding its points), or None."""
     from pxr import UsdGeom
 
+    extent = mesh.GetExtentAttr()
+    check_extent = list(extent.GetTimeSamples()) == frames.times
+    problem = None if check_extent else "extent is not sampled at the same times as points"
+    scan = ValueScan(rest) if rest is not None else None
+    lengths = []
+    for i, t in enumerate(frames.times):
+        value = frames.value(i)
+        if value is None:  # a value clip that does not open
+            lengths.append(0)
+            problem = problem or f"no points at time {t:g}"
+            continue
+        lengths.append(len(value))
+        if problem is None:
+            want = np.asarray(UsdGeom.PointBased.ComputeExtent(value), dtype=np.float64)
+            have = np.asarray(extent.Get(t), dtype=np.float64)
+            if have.shape != (2, 3) or not np.allclose(have, want, rtol=1e-5, atol=1e-6):
+                problem = f"extent at time {t:g} does not bound the points"
+        if scan is not None and len(value) == count:
+            scan.add(i, np.asarray(value, dtype=np.float32))
+    return lengths, scan, problem
+
+
+def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points",
+                        frames=(), extent_problem: str | None = None) -> None:
+    """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame (its first
+    problem found by _scan_points: `extent_problem`); for blend shapes, the extent at each time (sampled or not)
+    bounding the blended `frames`."""
     count = len(times)
     problems = []
     if times != [float(i) for i in range(count)]:
@@ -265,20 +309,8 @@ def _check_time_samples(report: Report, stage, mesh, times: list[float], what: s
             if box.shape != (2, 3) or (points < box[0] - slack).any() or (points > box[1] + slack).any():
                 problems.append(f"extent at time {t:g} does not bound the blended points")
                 break
-    elif list(extent.GetTimeSamples()) != times:
-        problems.append("extent is not sampled at the same times as points")
-    else:
-        points = mesh.GetPointsAttr()
-        for t in times:
-            value = points.Get(t)
-            if value is None:  # a value clip that does not open
-                problems.append(f"no points at time {t:g}")
-                break
-            want = np.asarray(UsdGeom.PointBased.ComputeExtent(value), dtype=np.float64)
-            have = np.asarray(extent.Get(t), dtype=np.float64)
-            if have.shape != (2, 3) or not np.allclose(have, want, rtol=1e-5, atol=1e-6):
-                problems.append(f"extent at time {t:g} does not bound the points")
-                break
+    elif extent_problem is not None:
+        problems.append(extent_problem)
     report.add(
         "time samples", not problems, "; ".join(problems) or f"{count} frames, one at each of 0..{count - 1}"
     )
