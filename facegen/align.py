@@ -48,14 +48,14 @@ _WIDE = {"beam": 1e-120, "wbeam": 1e-100, "pbeam": 1e-120, "maxhmmpf": -1}
 # "cmn" finds it (batch mean, the model's default; its one-word search costs little), and the aligning
 # decoders subtract it as given ("live" mode, set before each pass; with full_utt it stays fixed in a pass).
 _ALIGN = {"lm": None, "bestpath": False, "cmn": "live"}
-# The mismatch check's free phone loop ("phone-loop", _free_gaps) scores the acoustic model on every other frame
-# only (ds=2, the scores reused in between: 40 % less time); the words and phones of an alignment always come
-# from every frame. Neither it nor "cmn" needs the 130,000-word dictionary (a tenth of a second to load).
+# The mismatch check's free phone loop ("phone-loop", _free_gaps) scores the acoustic model on every third frame
+# only (ds=3, the scores reused in between: half the time of every frame); the words and phones of an alignment
+# always come from every frame. Neither it nor "cmn" needs the 130,000-word dictionary (a tenth of a second to load).
 _CONFIGS = {
     "align": _ALIGN,
     "align-wide": {**_ALIGN, **_WIDE},
     "align-nofiller": {**_ALIGN, "fsgusefiller": False, **_WIDE},
-    "phone-loop": {**_ALIGN, "ds": 2, "dict": os.devnull},
+    "phone-loop": {**_ALIGN, "ds": 3, "dict": os.devnull},
     "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False, "ds": 10, "dict": os.devnull},  # its features count
     "recognize": {},
 }
@@ -63,7 +63,7 @@ _CONFIGS = {
 # frames left outside its words, or a median word fitting the sounds worse than the best free phone
 # sequence by more than this (per-frame gap to the best HMM state, pocketsphinx's log units).
 MAX_UNEXPLAINED = 0.3
-MAX_WORD_GAP = 28.0
+MAX_WORD_GAP = 25.0
 
 
 def _decoder(kind: str):
@@ -215,13 +215,13 @@ def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.n
       for the right one (13 at most down to 10 dB SNR). A typo or a swapped word passes, as it should.
     End to end on those 48 clips: every matching transcript passes; 46/48 wrong sentences and 47/48
     half transcripts are refused (the misses are at 10 and 5 dB SNR).
-    Since then the free loop scores every other frame (ds=2) and its gaps are the loop's own phone scores (no
-    second alignment of its phones: 30 % less alignment time); the bound went from 22 to 28. Measured on the 20
+    Since then the free loop scores every third frame (ds=3) and its gaps are the loop's own phone scores (no
+    second alignment of its phones): 40 % less alignment time; the bound went from 22 to 25. Measured on the 20
     sentences of benchmarks/bench_batch.py (Flite, Festival and espeak-ng voices), each against its own and
     against another sentence, clean and with pink, white and babble noise at 10 and 5 dB SNR (7 conditions):
-    matching transcripts -7 to 44, refused 3/137 (one each with pink noise at 5 dB, babble at 10 and at 5 dB,
-    as many as the previous check refused); other sentences that still align 19-72, refused 90/100 (the
-    previous check: 77/100). Every one refused clean.
+    matching transcripts that align -13 to 41, refused 3/135 (with pink noise at 5 dB, babble at 10 and at 5 dB;
+    the previous check refused as many); other sentences that still align 12-67, refused 91/100 (the previous
+    check: 77/100). Every one refused clean. (ds=2 with a bound of 28: 3/135 and 89/100.)
     `gaps` and `free` are NaN outside the pieces scored (align_pieces.scored): their words are left out.
     """
     in_words = np.zeros(len(loud), bool)
