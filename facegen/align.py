@@ -83,6 +83,14 @@ def _decoder(kind: str):
     return _DECODERS[kind]
 
 
+def warm() -> None:
+    """Create the decoders every alignment uses now (the acoustic model and the 130,000-word dictionary: ~0.18 s),
+    e.g. in a process that forks workers; pocketsphinx starts no threads, so they fork safely."""
+    with _LOCK:
+        for kind in ("align", "phone-loop", "cmn"):
+            _decoder(kind)
+
+
 def _dictionary_word(decoder, token: str) -> str:
     """The decoder's dictionary entry for `token`.
 
