@@ -38,7 +38,9 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 BIWI = REPO.parent / "shared" / "biwi" / "BIWI.ply"
 FPS = 25.0
-TARGETS = {"forward_x_realtime": 100.0, "animate_5s_wall": 3.0, "help_wall": 0.5, "long_rss_mb": 2048.0}
+# issue 13: a 5 s clip -> .usdc in a new process <= 2.5 s, a one-minute recording <= 6 s
+TARGETS = {"forward_x_realtime": 100.0, "animate_5s_wall": 2.5, "animate_60s_wall": 6.0, "help_wall": 0.5,
+           "long_rss_mb": 2048.0}
 BLOCK_VARIANTS = (128, 256, 1024)  # output blocks timed besides the default (facegen.inference.BLOCK_FRAMES)
 STAGES = ("start-up", "model_load", "audio", "alignment", "text_model_load", "text_features", "audio_features",
           "inference", "writing", "exit")
@@ -275,6 +277,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
     from facegen.audio import load_audio, mel_features
     from facegen.inference import BLOCK_FRAMES, decoder_states, frame_stream
     from facegen.model import one_hot
+    from facegen.phones import silence
 
     samples, sr = load_audio(wav)
     mel = mel_features(samples, sr, bundle.features, bundle.mel_filters)
@@ -288,10 +291,12 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
         for s in range(0, T, block):
             frames.compute(s, min(s + block, T), out=buffer[s:s + block])
 
+    phones = torch.from_numpy(silence(T))[None] if bundle.config.n_phones else None  # a phone stream's input
+
     def one_pass() -> None:
         with torch.inference_mode():
             offsets = bundle.model(torch.from_numpy(mel)[None], torch.from_numpy(text)[None],
-                                   one_hot(0, bundle.config.num_speakers))
+                                   one_hot(0, bundle.config.num_speakers), phones=phones)
             _ = template[None] + offsets[0].numpy()
 
     def torch_blocks(block: int = BLOCK_FRAMES) -> None:
@@ -530,13 +535,17 @@ def main(argv: list[str] | None = None) -> int:
         ("model forward, 60 s clip (1500 frames)",
          f"{sixty['ours']:.3f} s = {sixty['seconds'] / sixty['ours']:.0f}x real time", "≥ 100x",
          sixty["seconds"] / sixty["ours"] >= TARGETS["forward_x_realtime"]),
-        ("`facegen animate` 5 s clip, new process, .usdc", f"{five['wall']:.2f} s", "≤ 3 s",
+        ("`facegen animate` 5 s clip, new process, .usdc", f"{five['wall']:.2f} s", "≤ 2.5 s",
          five["wall"] <= TARGETS["animate_5s_wall"]),
         ("`facegen --help`", f"{r['help']['median']:.2f} s", "≤ 0.5 s", r["help"]["median"] <= TARGETS["help_wall"]),
         ("no JIT warm-up on the animate path: librosa/numba never imported by `facegen animate`",
          "imported: " + (", ".join(five["modules"]) or "none of the heavy modules"), "no librosa, no numba",
          not {"librosa", "numba"} & set(five["modules"])),
     ]
+    if "60 s" in r["animate"]:
+        wall = r["animate"]["60 s"]["wall"]
+        r["targets"].insert(2, ("`facegen animate` 60 s clip with its transcript, new process, .usdc", f"{wall:.2f} s",
+                                "≤ 6 s", wall <= TARGETS["animate_60s_wall"]))
     if long10 and "rss_mb" in long10:
         r["targets"].append(("10 min of audio to .npy, peak RSS", f"{long10['rss_mb']:.0f} MB", "≤ 2048 MB",
                              long10["rss_mb"] <= TARGETS["long_rss_mb"]))
