@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from facegen.align_ahead import Aligned
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, write_animation
 from facegen.runtime import Say, silent
@@ -44,7 +45,7 @@ class Job:
     line: int = 0
     outputs: tuple[Path, ...] = ()
     problem: str | None = None
-    aligned: object | None = None
+    aligned: Aligned | None = None
 
     @property
     def targets(self) -> tuple[Path, ...]:

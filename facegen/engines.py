@@ -120,21 +120,22 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
     to_align = _alignable(queue, model)
     pending: dict = {}
     # The first submissions start the workers, which waits until the forkserver has imported torch: they are
-    # made from a thread, and this one aligns meanwhile.
-    first, queue[:workers + 1] = queue[:workers + 1], []
+    # made from a thread, and this one aligns meanwhile. `sent`: the chunks of `queue` submitted so far.
+    sent = min(workers + 1, len(queue))
     failed: list[BaseException] = []
-    starter = threading.Thread(target=_submit, args=(pool, first, batch_size, pending, failed), daemon=True)
+    starter = threading.Thread(target=_submit, args=(pool, queue[:sent], batch_size, pending, failed), daemon=True)
     starter.start()
     try:
-        while starter.is_alive() and _align_next(queue, to_align):
+        while starter.is_alive() and _align_next(to_align, sent):
             pass
         starter.join()
         if failed:
             raise failed[0]
-        while queue or pending:
-            while queue and len(pending) <= workers:  # every worker busy, and one chunk ready to start
-                _submit(pool, [queue.pop(0)], batch_size, pending)
-            aligned = _align_next(queue, to_align)
+        while sent < len(queue) or pending:
+            while sent < len(queue) and len(pending) <= workers:  # every worker busy, one chunk ready to start
+                _submit(pool, [queue[sent]], batch_size, pending)
+                sent += 1
+            aligned = _align_next(to_align, sent)
             done, _ = wait(pending, timeout=0 if aligned else None, return_when=FIRST_COMPLETED)
             for future in done:
                 chunk = pending.pop(future)
@@ -186,30 +187,28 @@ def _submit(pool: ProcessPoolExecutor, chunks_: list[list[Job]], batch_size: int
         failed.append(exc)
 
 
-def _align_next(queue: list[list[Job]], to_align: list[tuple[Job, bool]]) -> bool:
-    """Force-align the last waiting job of `to_align` whose chunk is still in `queue` (the chunks left have gone to
-    the workers, which align their own); False when there is none."""
-    in_queue = {id(job) for chunk in queue for job in chunk}
-    while to_align and id(to_align[-1][0]) not in in_queue:
+def _align_next(to_align: list[tuple[int, Job, bool]], sent: int) -> bool:
+    """Force-align the last job of `to_align` whose chunk (its index in the queue) has not been submitted yet (the
+    chunks before `sent` have gone to the workers, which align their own); False when there is none."""
+    while to_align and to_align[-1][0] < sent:
         to_align.pop()
     if not to_align:
         return False
-    job, phones = to_align.pop()
+    _, job, phones = to_align.pop()
     job.aligned = align_file(job.audio, job.text, phones)
     return True
 
 
-def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[Job, bool]]:
-    """The waiting jobs this process can force-align, in queue order (taken from the end), with whether the model
-    needs their phones too: those with a transcript and no alignment file, when the model uses the words."""
-    from facegen.pipeline import forced_alignment_of
+def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[int, Job, bool]]:
+    """(chunk index, job, whether the model needs its phones too) for the jobs this process can force-align, in
+    queue order (taken from the end): those whose words come from forced alignment, when the model uses them."""
+    from facegen.pipeline import force_aligned, forced_alignment_of
 
     needs = forced_alignment_of(model)
     if needs is None:
         return []
-    return [(job, needs == "phones") for chunk in queue for job in chunk
-            if job.text is not None and job.text.strip() and job.alignment is None and not job.no_text
-            and not job.problem]
+    return [(i, job, needs == "phones") for i, chunk in enumerate(queue) for job in chunk
+            if force_aligned(job.text, job.alignment, job.no_text) and not job.problem]
 
 
 def _stop_workers(pool: ProcessPoolExecutor, grace: float = 5.0) -> None:

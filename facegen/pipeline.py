@@ -260,7 +260,7 @@ def animate(
 def _start_ahead(audio, text: str | None, alignment, no_text: bool, bundle) -> AlignAhead | None:
     """The forced alignment of `text` started in a process of its own while this one imports torch and loads
     the model (align_ahead.py), when this clip will be force-aligned; else None."""
-    if text is None or alignment is not None or no_text or not Path(audio).is_file():
+    if not force_aligned(text, alignment, no_text) or not Path(audio).is_file():
         return None
     if isinstance(bundle, Bundle):  # loaded already, so torch is too: nothing to overlap
         return None
@@ -272,16 +272,21 @@ def _start_ahead(audio, text: str | None, alignment, no_text: bool, bundle) -> A
     return align_ahead.start(audio, text, with_phones=needs == "phones")
 
 
+def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
+    """Whether a clip's words come from forced alignment of `text` (not an alignment file, not recognition)."""
+    return text is not None and bool(text.strip()) and alignment is None and not no_text
+
+
 def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
     """What the model bundle at `model` (None: the built-in one) needs from a transcript's forced alignment:
     "phones" (words and phones), "words", or None (an audio-only model, or a header that cannot be read:
-    load_bundle will say what is wrong). Read from the header only: model.ModelConfig imports torch."""
+    load_bundle will say what is wrong). Read from the header only, without torch."""
     from facegen.bundle import default_bundle_path, read_metadata
+    from facegen.model_config import ModelConfig
 
     try:
-        config = read_metadata(model if model is not None else default_bundle_path())["model_config"]
-        if config.get("n_phones"):
-            return "phones"
-        return "words" if config.get("modalities", "both") in ("both", "text") else None
-    except (FacegenError, KeyError, TypeError, AttributeError):
+        config = ModelConfig.from_dict(read_metadata(model if model is not None else default_bundle_path())
+                                       ["model_config"])
+    except (FacegenError, KeyError, TypeError, ValueError):
         return None
+    return "phones" if config.n_phones else "words" if config.uses_text else None

@@ -46,7 +46,8 @@ from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
-from facegen.model import FUSIONS, MODALITIES, FaceModel, ModelConfig, one_hot
+from facegen.model import FaceModel, ModelConfig, one_hot
+from facegen.model_config import FUSIONS, MODALITIES
 from facegen.phones import PHONES
 from facegen.runtime import Say, progress_bar, say_stderr, select_device, silent, warn_stderr
 
