@@ -2,7 +2,9 @@
 commit side by side in one process (`git show REF:facegen/align.py` imported as a second module).
 
 Target (issue 13): at least 3x faster than the baseline on 60 s of speech, word timings within 20 ms of
-the baseline's. Clips are built at run time (cached under the temp folder, never in the repo): sentences
+the baseline's. The baseline's own spread is shown beside it ("again": the largest difference and the words
+> 20 ms between its timed call and one more call on the same clip: it keeps pocketsphinx's noise estimate
+from one call to the next). Clips are built at run time (cached under the temp folder, never in the repo): sentences
 of the synthetic corpus said by several espeak-ng, Flite and Festival voices with pauses of 0.3-0.9 s
 between them, and examples/excellent_room.wav repeated with pauses. Where the synthesiser gives word
 timings, both aligners' word onsets are also compared with them.
@@ -90,6 +92,12 @@ def timed(module, audio: np.ndarray, text: str, runs: int) -> tuple[float, float
     return statistics.median(walls), statistics.median(cpus), result
 
 
+def differences(words, others) -> np.ndarray:
+    """Per word, the larger of its start and end differences in ms (whole: times are rounded to 1 ms)."""
+    return np.round([max(abs(a.start - b.start), abs(a.end - b.end)) * 1000
+                     for a, b in zip(words, others, strict=True)])
+
+
 def onset_error(words, truth) -> float | None:
     if truth is None or [w.text.lower() for w in words] != [t.lower().strip(".,?!") for t, _, _ in truth]:
         return None
@@ -109,26 +117,29 @@ def main(argv: list[str] | None = None) -> int:
     for module, kinds in ((old, ("align",)), (new, ("align", "cmn"))):
         for kind in kinds:
             module._decoder(kind)  # loading the model is not alignment
-    worst, speedups = 0.0, []
+    worst, speedups, words, moved = 0.0, [], 0, 0
     print(f"{'clip':15s} {'s':>5s} {'base s':>7s} {'new s':>6s} {'x':>5s} {'base cpu':>8s} {'new cpu':>7s} "
-          f"{'max diff':>8s} {'>20ms':>5s}  onset error vs synthesiser (base/new)")
+          f"{'max diff':>8s} {'>20ms':>5s} {'words':>5s} {'again':>9s}  onset error vs synthesiser (base/new)")
     for name in CLIPS:
         audio, text, truth = build_clip(name, args.seconds)
         old_wall, old_cpu, old_words = timed(old, audio, text, args.runs)
         new_wall, new_cpu, new_words = timed(new, audio, text, args.runs)
-        diffs = np.array([max(abs(a.start - b.start), abs(a.end - b.end))
-                          for a, b in zip(old_words, new_words, strict=True)]) * 1000
+        diffs = differences(old_words, new_words)
+        again = differences(old_words, old.align(audio, RATE, text))  # the baseline's own spread
         worst = max(worst, float(diffs.max()))
+        words += len(diffs)
         speedups.append(old_wall / new_wall)
         errors = [onset_error(w, truth) for w in (old_words, new_words)]
         shown = "/".join("-" if e is None else f"{e:.0f} ms" for e in errors)
         print(f"{name:15s} {len(audio) / RATE:5.1f} {old_wall:7.2f} {new_wall:6.2f} {old_wall / new_wall:5.2f} "
-              f"{old_cpu:8.2f} {new_cpu:7.2f} {diffs.max():6.0f}ms {int(np.sum(diffs > 20)):5d}  {shown}")
+              f"{old_cpu:8.2f} {new_cpu:7.2f} {diffs.max():6.0f}ms {int(np.sum(diffs > 20)):5d} {len(diffs):5d} "
+              f"{again.max():4.0f}ms {int(np.sum(again > 20)):2d}  {shown}")
+        moved += int(np.sum(diffs > 20))
         for a, b, d in zip(old_words, new_words, diffs, strict=True):
             if d > 20:
                 print(f"    {a.text!r}: baseline {a.start:.2f}-{a.end:.2f}, new {b.start:.2f}-{b.end:.2f}")
     print(f"median speed-up {statistics.median(speedups):.2f}x (target >= 3x); largest word timing difference "
-          f"{worst:.0f} ms (target <= 20 ms)")
+          f"{worst:.0f} ms, {moved} of {words} words > 20 ms (target <= 20 ms)")
     return 0
 
 

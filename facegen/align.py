@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import re
+import tempfile
 import threading
 import unicodedata
 import warnings
@@ -46,7 +47,9 @@ _PRONOUNCED: dict[int, set[str]] = {}  # id(decoder) → words whose espeak pron
 _WIDE = {"beam": 1e-120, "wbeam": 1e-100, "pbeam": 1e-120, "maxhmmpf": -1}
 # Pieces of a clip are aligned with the whole clip's cepstral mean (as one search over the clip would be):
 # "cmn" finds it (batch mean, the model's default; its one-word search costs little), and the aligning
-# decoders subtract it as given ("live" mode, set before each pass; with full_utt it stays fixed in a pass).
+# decoders subtract it as given ("live" mode, set before each pass). A model's feat.params overrides what a
+# Decoder is given (the en-us model says "-cmn batch": each piece would subtract its own mean, and the words
+# near a cut move by up to half a second), so "live" reaches pocketsphinx through a copy of it (_decoder).
 _ALIGN = {"lm": None, "bestpath": False, "cmn": "live"}
 # The mismatch check's free phone loop ("phone-loop", _free_gaps) scores the acoustic model on every third frame
 # only (ds=3, the scores reused in between: half the time of every frame); the words and phones of an alignment
@@ -71,7 +74,7 @@ def _decoder(kind: str):
         import pocketsphinx
 
         try:
-            decoder = pocketsphinx.Decoder(samprate=RATE, loglevel="FATAL", **_CONFIGS[kind])
+            decoder = _new_decoder(pocketsphinx, _CONFIGS[kind])
             if kind == "phone-loop":
                 decoder.add_allphone_file("_phones", None)
             elif kind == "cmn":
@@ -81,6 +84,25 @@ def _decoder(kind: str):
                                "`pip install --force-reinstall pocketsphinx`") from exc
         _DECODERS[kind] = decoder
     return _DECODERS[kind]
+
+
+def _new_decoder(pocketsphinx, config: dict):
+    """A pocketsphinx Decoder with `config`, its cepstral mean mode included: the acoustic model's feat.params
+    with that mode, in a temporary file it reads once (pocketsphinx lets a model's feat.params override the
+    Decoder's own arguments)."""
+    cmn = config.get("cmn")
+    if cmn is None:
+        return pocketsphinx.Decoder(samprate=RATE, loglevel="FATAL", **config)
+    with open(os.path.join(pocketsphinx.Config(**config)["hmm"], "feat.params"), encoding="utf-8") as file:
+        lines = [line for line in file.read().splitlines() if not line.startswith("-cmn ")]
+    with tempfile.TemporaryDirectory(prefix="facegen-align-") as folder:
+        params = os.path.join(folder, "feat.params")
+        with open(params, "w", encoding="utf-8") as file:
+            file.write("\n".join([*lines, f"-cmn {cmn}", ""]))
+        decoder = pocketsphinx.Decoder(samprate=RATE, loglevel="FATAL", featparams=params, **config)
+    if decoder.config["cmn"] != cmn:
+        raise RuntimeError(f"the decoder's cepstral mean mode is {decoder.config['cmn']}, not {cmn}")
+    return decoder
 
 
 def warm() -> None:
@@ -224,12 +246,13 @@ def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.n
     End to end on those 48 clips: every matching transcript passes; 46/48 wrong sentences and 47/48
     half transcripts are refused (the misses are at 10 and 5 dB SNR).
     Since then the free loop scores every third frame (ds=3) and its gaps are the loop's own phone scores (no
-    second alignment of its phones): 40 % less alignment time; the bound went from 22 to 25. Measured on the 20
-    sentences of benchmarks/bench_batch.py (Flite, Festival and espeak-ng voices), each against its own and
-    against another sentence, clean and with pink, white and babble noise at 10 and 5 dB SNR (7 conditions):
-    matching transcripts that align -13 to 41, refused 3/135 (with pink noise at 5 dB, babble at 10 and at 5 dB;
-    the previous check refused as many); other sentences that still align 12-67, refused 91/100 (the previous
-    check: 77/100). Every one refused clean. (ds=2 with a bound of 28: 3/135 and 89/100.)
+    second alignment of its phones): 40 % less alignment time; the bound went from 22 to 25.
+    benchmarks/calibrate_mismatch.py measures it: the 20 sentences of benchmarks/bench_batch.py (Flite,
+    Festival and espeak-ng voices), each against its own and the next sentence, clean and with pink, white and
+    babble noise at 10 and 5 dB SNR (7 conditions, 140 runs each). Matching transcripts: 4 find no alignment
+    (at 5 dB), the rest score -13 to 37; refused 0/20 clean, 2/60 at 10 dB, 7/60 at 5 dB. Wrong ones: 47 find
+    no alignment or leave too much speech outside words, the rest score 15 to 51; refused 19/20 clean, 54/60
+    at 10 dB, 53/60 at 5 dB.
     `gaps` and `free` are NaN outside the pieces scored (align_pieces.scored): their words are left out.
     """
     in_words = np.zeros(len(loud), bool)

@@ -243,6 +243,28 @@ def test_long_audio_aligns_piece_by_piece(corpus):
     assert all(b > a for _, a, b in phones) and phones[-1][2] <= words[-1].end + 1e-6
 
 
+def test_pieces_give_the_word_timings_of_one_search_over_the_clip(corpus, monkeypatch):
+    """Every piece subtracts the whole clip's cepstral mean, as one search would: a piece's own mean (the
+    acoustic model's feat.params says "-cmn batch", and it overrides the decoder's settings) moved words near
+    the cuts by up to half a second. What is left: a piece's first word may start a little earlier (its
+    noise estimate starts afresh in the pause before it)."""
+    import facegen.align as align_module
+    import facegen.align_pieces
+
+    for kind in ("align", "align-wide", "align-nofiller", "phone-loop"):
+        assert align_module._decoder(kind).config["cmn"] == "live"
+    audio, text, _ = long_clip(corpus)
+    rate = corpus[0][1].sample_rate
+    split = align(audio, rate, text)
+    monkeypatch.setattr(facegen.align_pieces, "PIECE_SECONDS", 1e9)
+    monkeypatch.setattr(align_module, "pieces", facegen.align_pieces.pieces)
+    whole = align(audio, rate, text)
+    starts = np.abs([a.start - b.start for a, b in zip(split, whole, strict=True)])
+    ends = np.abs([a.end - b.end for a, b in zip(split, whole, strict=True)])
+    assert ends.max() <= 0.02 + 1e-9 and np.sum(starts > 0.02 + 1e-9) <= 2, (starts.max(), ends.max())
+    assert starts.max() <= 0.1
+
+
 @pytest.mark.parametrize("case", ["half of the sentences", "the wrong sentences"])
 def test_long_audio_with_a_mismatched_transcript_is_an_error(corpus, case):
     audio, _, _ = long_clip(corpus)
