@@ -324,17 +324,13 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
             kept = segments if last else [s for s in segments if s[1] < cut - start]
             end = n_frames if last else max(cut, start + (kept[-1][2] + 1 if kept else 0))
             if kept and (with_phones or p in chosen):
-                if not last:  # the scores of the piece alone: its kept words aligned again without what follows
-                    part = part[:(end - start) * HOP * 2]
-                    decoder.set_align_text(" ".join(w for w, _, _ in kept))
-                    _decode(decoder, part, cmn)
+                alignment = _piece_states(decoder, part, kept, end - start, cmn, last)
                 n = min(decoder.n_frames(), end - start)
-                alignment = _state_pass(decoder, part, cmn)
                 if with_phones:
                     phones += _phones(alignment, len(kept), start, duration)
                 if p in chosen:
                     gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[:n]
-                    piece_free = _free_gaps(part, decoder.n_frames(), cmn)
+                    piece_free = _free_gaps(part[:(end - start) * HOP * 2], n, cmn)
                     free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
             words += [(w, a + start, b + start) for w, a, b in kept]
             start, p = end, p + 1
@@ -375,6 +371,24 @@ def _align_piece(pcm: bytes, tokens: list[str], length: int, rest: int, cmn: str
             elif not prefix or not words:
                 break
     return None
+
+
+def _piece_states(decoder, pcm: bytes, kept: list[tuple[str, int, int]], length: int, cmn: str, last: bool):
+    """The state alignment of a piece (`pcm`, its lookahead included) whose words `decoder` has just aligned.
+
+    The state pass follows all the words the search placed, those of the lookahead too, over the audio they
+    cover: the words at the cut get the phones of one search over the clip. The search may have stopped inside
+    the lookahead's last word, which the state pass then cannot place (pocketsphinx: "Failed to stop utterance
+    processing"); then the kept words are aligned again alone, over the piece's `length` frames."""
+    if not last:
+        covered = max(s.end_frame for s in decoder.seg()) + 1
+        try:
+            return _state_pass(decoder, pcm[:covered * HOP * 2], cmn)
+        except RuntimeError:
+            pcm = pcm[:length * HOP * 2]
+            decoder.set_align_text(" ".join(w for w, _, _ in kept))
+            _decode(decoder, pcm, cmn)
+    return _state_pass(decoder, pcm, cmn)
 
 
 def _phones(alignment, count: int, first: int, duration: float) -> list[Phone]:
