@@ -46,6 +46,10 @@ class Aligned:
         PROFILE.add("alignment_in_parallel", self.seconds)
         return self.words, self.phones
 
+    def ready(self) -> bool:
+        """Done already: always."""
+        return True
+
     def close(self) -> None:
         """Nothing runs: nothing to stop."""
 
@@ -75,6 +79,13 @@ class AlignAhead:
 
     def __init__(self, process, receiver) -> None:
         self._process, self._receiver = process, receiver
+
+    def ready(self) -> bool:
+        """Whether `result()` would answer at once (the child has answered, or is gone)."""
+        try:
+            return self._receiver.poll()
+        except (EOFError, OSError):
+            return True
 
     def result(self) -> tuple[list, list | None] | None:
         """(words, phones or None) as align gives them, None when the child gave no answer; raises the

@@ -122,7 +122,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
             usd_clips, rig, morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import check_writable
-    from facegen.exchange import check_write_options, format_module, format_of, write_animation
+    from facegen.exchange import check_write_options, format_module, format_of, import_writer, write_animation
     from facegen.exchange.wav import is_same_file, sidecar_path
     from facegen.pipeline import animate as run
 
@@ -155,7 +155,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     stream = format_of(output).streams_with(options) and not preview
     anim = run(audio, text=_read_text(text, text_file), alignment=alignment, no_text=no_text, speaker=speaker,
                bundle=model, template=template, text_model=text_model, device=device, stream=stream,
-               progress=progress, warn=_progress(False))
+               progress=progress, warn=_progress(False), meanwhile=lambda: import_writer(output))
     written = write_animation(anim, output, audio_source=audio, **options)
     progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
     if preview:

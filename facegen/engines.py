@@ -21,13 +21,14 @@ from concurrent.futures.process import BrokenProcessPool
 from facegen.align_ahead import align_file
 from facegen.batch import Job, JobResult, run_batch
 from facegen.errors import FacegenError
+from facegen.exchange.formats import USD_LIBRARIES
 from facegen.runtime import cores
 
 ENGINES = ("local", "ray")
 # What the local engine's worker processes import before they are forked (once, not in every worker): torch,
 # USD, pocketsphinx and the aligner's decoders (align_warm), the text model's code and the pipeline around them.
 # Nothing here may start threads (torch and USD start theirs on first use, not on import).
-PRELOAD = ["torch", "pxr.Usd", "pxr.UsdGeom", "pxr.UsdSkel", "pxr.UsdShade", "pxr.UsdMedia", "pocketsphinx",
+PRELOAD = ["torch", *USD_LIBRARIES, "pocketsphinx",
            "safetensors.torch", "tokenizers", "facegen.engines", "facegen.pipeline", "facegen.align_warm",
            "facegen.minilm", "facegen.text", "facegen.exchange.usd", "facegen.validate"]
 OnResult = Callable[[JobResult], None]

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -93,9 +94,12 @@ def prepare_clip(
     progress: Say = silent,
     warn: Say = silent,
     ahead: AlignAhead | Aligned | None = None,
+    meanwhile: Callable[[], object] | None = None,
 ) -> Clip:
     """Everything before the network: audio, word timings, text and audio features (see `animate`);
-    `ahead`: the forced alignment of `text` already running in a process of its own, or done (align_ahead.py)."""
+    `ahead`: the forced alignment of `text` already running in a process of its own, or done (align_ahead.py).
+    While that alignment still runs, the transcript's word vectors are computed (they need the words, not their
+    times) and `meanwhile` is called (e.g. to import the writer's libraries)."""
     spk = bundle.speaker_index(speaker)
     mesh = resolve_template(bundle, template)
     with PROFILE.stage("audio"):
@@ -111,26 +115,50 @@ def prepare_clip(
     words: list = []
     source = "none (--no-text)"
     text_feats = phone_feats = None
+    uses_text = bundle.config.uses_text and not no_text
+    early: tuple[list[str], np.ndarray] | None = None  # the transcript's words and their vectors
+    if ahead is not None and not ahead.ready():  # work that needs no word times, while they are found
+        if meanwhile is not None:
+            with PROFILE.stage("while_aligning"):
+                meanwhile()
+        if uses_text:
+            from facegen.words import normalize_transcript
+
+            backend = _text_backend(bundle, text_model)
+            with PROFILE.stage("text_features"):
+                names = [word for word, _ in normalize_transcript(text)]
+                early = names, backend.word_vectors(names)
     if bundle.config.n_phones:
         with PROFILE.stage("alignment"):
             words, source, phone_feats = _words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,
                                                            no_text=no_text, warn=warn, ahead=ahead)
-    if bundle.config.uses_text and not no_text:
+    if uses_text:
         if not bundle.config.n_phones:
             with PROFILE.stage("alignment"):
                 words, source = get_words(samples, sr, text=text, alignment=alignment, progress=progress,
                                           warn=warn, ahead=ahead)
-        from facegen.text import check_text_dim, load_text_backend, text_features
+        from facegen.text import frame_features, text_features
 
         progress(f"text features ({bundle.text_backend}) for {len(words)} words")
-        with PROFILE.stage("text_model_load"):
-            backend = load_text_backend(bundle.text_backend, text_model)
-        check_text_dim(backend, bundle.config.text_dim, bundle.text_backend)
-        with PROFILE.stage("text_features"):
-            text_feats = text_features(words, backend, T, cfg.fps)
+        if early is not None and early[0] == [w.text for w in words]:
+            text_feats = frame_features(words, early[1], T, cfg.fps)
+        else:
+            backend = _text_backend(bundle, text_model)
+            with PROFILE.stage("text_features"):
+                text_feats = text_features(words, backend, T, cfg.fps)
 
     progress(f"inference for {T} frames")
     return Clip(Path(audio).name, samples, sr, mel, text_feats, words, source, spk, mesh, phone_feats)
+
+
+def _text_backend(bundle: Bundle, text_model: str | None):
+    """The bundle's text model (`text_model`: where its files are), checked against the bundle."""
+    from facegen.text import check_text_dim, load_text_backend
+
+    with PROFILE.stage("text_model_load"):
+        backend = load_text_backend(bundle.text_backend, text_model)
+    check_text_dim(backend, bundle.config.text_dim, bundle.text_backend)
+    return backend
 
 
 def _forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None,
@@ -221,6 +249,7 @@ def animate(
     stream: bool = False,
     progress: Say = silent,
     warn: Say = silent,
+    meanwhile: Callable[[], object] | None = None,
 ) -> Animation:
     """Animate the face for one speech clip.
 
@@ -234,7 +263,8 @@ def animate(
     always see.
     In a process that has not imported torch yet (a new `facegen animate`, a script's first call), the forced
     alignment of `text` runs in a forked process while this one imports torch and loads the model
-    (align_ahead.py): the same result, sooner.
+    (align_ahead.py): the same result, sooner. If it still runs once the model is loaded, `meanwhile` is called
+    (the CLI imports the writer's libraries).
     """
     PROFILE.mark("animate_start")
     ahead = _start_ahead(audio, text, alignment, no_text, bundle)
@@ -245,7 +275,7 @@ def animate(
                 bundle = load_bundle(bundle)
         clip = prepare_clip(audio, bundle=bundle, text=text, alignment=alignment, no_text=no_text,
                             speaker=speaker, template=template, text_model=text_model, progress=progress,
-                            warn=warn, ahead=ahead)
+                            warn=warn, ahead=ahead, meanwhile=meanwhile)
     finally:
         if ahead is not None:
             ahead.close()

@@ -27,6 +27,7 @@ class Format:
     streams: bool = False  # its writer reads frames block by block
     whole_clip: tuple[str, str] | None = None  # (option, value) with which the writer needs every frame at once
     arkit: bool = False  # its files hold ARKit shape weights (fitted on the rig's face: facegen.arkit)
+    libraries: tuple[str, ...] = ()  # the modules its writer imports that take long to import (exchange.import_writer)
 
     def streams_with(self, options: dict) -> bool:
         """True when writing with `options` reads the frames block by block."""
@@ -36,16 +37,17 @@ class Format:
         return self.streams and options.get(option) != value
 
 
+USD_LIBRARIES = ("pxr.Usd", "pxr.UsdGeom", "pxr.UsdSkel", "pxr.UsdShade", "pxr.UsdMedia")  # ~0.25 s
 FORMATS = (
     Format("USD", "facegen.exchange.usd", (".usda", ".usdc", ".usd"),
            ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit", "clips"), "facegen.validate.usd",
-           streams=True, whole_clip=("mode", "blendshapes")),  # blendshapes: a PCA over the whole clip
+           streams=True, whole_clip=("mode", "blendshapes"), libraries=USD_LIBRARIES),  # blendshapes: a PCA over the whole clip
     Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True),
     Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"),
            ("rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.gltf"),
     Format("USDZ", "facegen.exchange.usdz", (".usdz",),
            ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit", "clips"),
-           "facegen.validate.usd"),
+           "facegen.validate.usd", libraries=USD_LIBRARIES),
     # ARKit's 52 shape weights per frame (fitted on facegen's face): Audio2Face JSON, Live Link Face CSV
     Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit", streams=True,
            arkit=True),
