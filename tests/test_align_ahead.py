@@ -140,3 +140,31 @@ def test_align_file_answers_as_the_forked_aligner_does():
     assert failed.error == str(here.value) and failed.words is None
     with pytest.raises(FacegenError, match="does not match the speech"):
         failed.result()
+
+
+def test_while_the_alignment_runs_the_word_vectors_are_computed_and_meanwhile_called(monkeypatch):
+    """The work that needs no word times is done while they are found: the same clip as without it."""
+    import facegen.text
+    from facegen.bundle import load_bundle
+    from facegen.exchange import import_writer
+    from facegen.pipeline import prepare_clip
+
+    bundle = load_bundle()
+    later = prepare_clip(WAV, bundle=bundle, text=TEXT)
+    found = align_ahead.align_file(WAV, TEXT, with_phones=bool(bundle.config.n_phones))
+
+    class Running(align_ahead.Aligned):
+        def ready(self) -> bool:  # still aligning when asked
+            return False
+
+    def no_late_features(*args, **kwargs):
+        raise AssertionError("the word vectors were computed again after the alignment")
+
+    called = []
+    monkeypatch.setattr(facegen.text, "text_features", no_late_features)
+    meanwhile = Running(found.words, found.phones)
+    clip = prepare_clip(WAV, bundle=bundle, text=TEXT, ahead=meanwhile,
+                        meanwhile=lambda: called.append(import_writer("out.usdc")))
+    assert called == [None] and "pxr.UsdGeom" in sys.modules and "pxr.UsdMedia" in sys.modules
+    assert clip.words == later.words
+    assert np.array_equal(clip.text_features, later.text_features) and np.array_equal(clip.phones, later.phones)
