@@ -24,6 +24,7 @@ import numpy as np
 from facegen.align_pieces import (
     HOP,
     LOOKAHEAD,
+    LOOKBEHIND,
     RATE,
     loud_frames,
     pieces,
@@ -311,28 +312,32 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
             last = p == len(spans) - 1
             cut = spans[p][1]
             stop = n_frames if last else min(n_frames, cut + LOOKAHEAD)
-            part = pcm[start * HOP * 2:stop * HOP * 2]
-            found = _align_piece(part, [t for _, t in spoken[len(words):]], stop - start, n_frames - start,
-                                 cmn, prefix=not last)
-            if found is None:
+            back = 1 if words else 0  # the piece before's last word, aligned again: LOOKBEHIND in align_pieces
+            first = max(0, words[-1][1] - LOOKBEHIND) if words else 0  # the search's first frame
+            part = pcm[first * HOP * 2:stop * HOP * 2]
+            found = _align_piece(part, [t for _, t in spoken[len(words) - back:]], stop - first,
+                                 n_frames - first, cmn, prefix=not last)
+            if found is None or len(found[1]) <= back:
                 if last:
                     raise _mismatch("no alignment of its words to the audio exists")
                 chosen = {i for i in chosen if i < p} | ({p} if any(i >= p for i in chosen) else set())
                 spans[p:] = [(start, n_frames)]  # a piece whose words cannot be told apart: align the rest at once
                 continue
             decoder, segments = found
-            kept = segments if last else [s for s in segments if s[1] < cut - start]
-            end = n_frames if last else max(cut, start + (kept[-1][2] + 1 if kept else 0))
+            kept = segments[back:] if last else [s for s in segments[back:] if s[1] < cut - first]
+            if kept and words and kept[0][1] + first <= words[-1][2]:  # never before the word before ends
+                kept[0] = (kept[0][0], words[-1][2] + 1 - first, max(kept[0][2], words[-1][2] + 1 - first))
+            end = n_frames if last else max(cut, first + (kept[-1][2] + 1 if kept else 0))
             if kept and (with_phones or p in chosen):
-                alignment = _piece_states(decoder, part, kept, end - start, cmn, last)
-                n = min(decoder.n_frames(), end - start)
+                alignment = _piece_states(decoder, part, segments[:back + len(kept)], end - first, cmn, last)
                 if with_phones:
-                    phones += _phones(alignment, len(kept), start, duration)
+                    phones += _phones(alignment, back, len(kept), first, duration)
                 if p in chosen:
-                    gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[:n]
-                    piece_free = _free_gaps(part[:(end - start) * HOP * 2], n, cmn)
+                    n = min(decoder.n_frames() + first, end) - start
+                    gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[start - first:][:n]
+                    piece_free = _free_gaps(pcm[start * HOP * 2:end * HOP * 2], n, cmn)
                     free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
-            words += [(w, a + start, b + start) for w, a, b in kept]
+            words += [(w, a + first, b + first) for w, a, b in kept]
             start, p = end, p + 1
     if len(words) < len(spoken):
         raise _mismatch("no alignment of its words to the audio exists")
@@ -374,12 +379,13 @@ def _align_piece(pcm: bytes, tokens: list[str], length: int, rest: int, cmn: str
 
 
 def _piece_states(decoder, pcm: bytes, kept: list[tuple[str, int, int]], length: int, cmn: str, last: bool):
-    """The state alignment of a piece (`pcm`, its lookahead included) whose words `decoder` has just aligned.
+    """The state alignment of a piece (`pcm`, its lookbehind and lookahead included) whose words `decoder` has
+    just aligned; `kept`: its words up to the cut (the lookbehind's word first).
 
     The state pass follows all the words the search placed, those of the lookahead too, over the audio they
     cover: the words at the cut get the phones of one search over the clip. The search may have stopped inside
     the lookahead's last word, which the state pass then cannot place (pocketsphinx: "Failed to stop utterance
-    processing"); then the kept words are aligned again alone, over the piece's `length` frames."""
+    processing"); then the kept words are aligned again alone, over the piece's first `length` frames."""
     if not last:
         covered = max(s.end_frame for s in decoder.seg()) + 1
         try:
@@ -391,14 +397,18 @@ def _piece_states(decoder, pcm: bytes, kept: list[tuple[str, int, int]], length:
     return _state_pass(decoder, pcm, cmn)
 
 
-def _phones(alignment, count: int, first: int, duration: float) -> list[Phone]:
-    """The phones of the first `count` words of a piece's state alignment (`first`: the piece's first frame).
-    Read while iterating: an entry of pocketsphinx's alignment is only valid while its iterator is."""
+def _phones(alignment, skip: int, count: int, first: int, duration: float) -> list[Phone]:
+    """The phones of `count` words of a piece's state alignment after its first `skip` words (`first`: the
+    frame the piece's search started at). Read while iterating: an entry of pocketsphinx's alignment is only
+    valid while its iterator is."""
     phones: list[Phone] = []
     for word in alignment:
         if count == 0:
             break
         if _is_filler(word.name):
+            continue
+        if skip:
+            skip -= 1
             continue
         count -= 1
         phones += [(phone.name, round((first + phone.start) * FRAME, 3),

@@ -243,11 +243,11 @@ def test_long_audio_aligns_piece_by_piece(corpus):
     assert all(b > a for _, a, b in phones) and phones[-1][2] <= words[-1].end + 1e-6
 
 
-def test_pieces_give_the_word_timings_of_one_search_over_the_clip(corpus, monkeypatch):
-    """Every piece subtracts the whole clip's cepstral mean, as one search would: a piece's own mean (the
-    acoustic model's feat.params says "-cmn batch", and it overrides the decoder's settings) moved words near
-    the cuts by up to half a second. What is left: a piece's first word may start a little earlier (its
-    noise estimate starts afresh in the pause before it)."""
+def test_pieces_give_the_timings_of_one_search_over_the_clip(corpus, monkeypatch):
+    """Piece by piece, the words and phones of one search over the whole clip. Every piece subtracts the whole
+    clip's cepstral mean (a piece's own mean, which the acoustic model's feat.params asked for over the decoder's
+    settings, moved words near the cuts by up to half a second), and aligns again the last word of the piece
+    before it (a search's noise estimate starts afresh: a piece's first word started up to 90 ms early)."""
     import facegen.align as align_module
     import facegen.align_pieces
 
@@ -255,14 +255,12 @@ def test_pieces_give_the_word_timings_of_one_search_over_the_clip(corpus, monkey
         assert align_module._decoder(kind).config["cmn"] == "live"
     audio, text, _ = long_clip(corpus)
     rate = corpus[0][1].sample_rate
-    split = align(audio, rate, text)
+    split = align_phones(audio, rate, text)
     monkeypatch.setattr(facegen.align_pieces, "PIECE_SECONDS", 1e9)
     monkeypatch.setattr(align_module, "pieces", facegen.align_pieces.pieces)
-    whole = align(audio, rate, text)
-    starts = np.abs([a.start - b.start for a, b in zip(split, whole, strict=True)])
-    ends = np.abs([a.end - b.end for a, b in zip(split, whole, strict=True)])
-    assert ends.max() <= 0.02 + 1e-9 and np.sum(starts > 0.02 + 1e-9) <= 2, (starts.max(), ends.max())
-    assert starts.max() <= 0.1
+    whole = align_phones(audio, rate, text)
+    assert split[0] == whole[0]
+    assert split[1] == whole[1]
 
 
 @pytest.mark.parametrize("case", ["half of the sentences", "the wrong sentences"])
