@@ -313,10 +313,10 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
             cut = spans[p][1]
             stop = n_frames if last else min(n_frames, cut + LOOKAHEAD)
             back = 1 if words else 0  # the piece before's last word, aligned again: LOOKBEHIND in align_pieces
-            first = max(0, words[-1][1] - LOOKBEHIND) if words else 0  # the search's first frame
-            part = pcm[first * HOP * 2:stop * HOP * 2]
-            found = _align_piece(part, [t for _, t in spoken[len(words) - back:]], stop - first,
-                                 n_frames - first, cmn, prefix=not last)
+            origin = max(0, words[-1][1] - LOOKBEHIND) if words else 0  # the first frame of its search
+            part = pcm[origin * HOP * 2:stop * HOP * 2]
+            found = _align_piece(part, [t for _, t in spoken[len(words) - back:]], stop - origin,
+                                 n_frames - origin, cmn, prefix=not last)
             if found is None or len(found[1]) <= back:
                 if last:
                     raise _mismatch("no alignment of its words to the audio exists")
@@ -324,20 +324,20 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
                 spans[p:] = [(start, n_frames)]  # a piece whose words cannot be told apart: align the rest at once
                 continue
             decoder, segments = found
-            kept = segments[back:] if last else [s for s in segments[back:] if s[1] < cut - first]
-            if kept and words and kept[0][1] + first <= words[-1][2]:  # never before the word before ends
-                kept[0] = (kept[0][0], words[-1][2] + 1 - first, max(kept[0][2], words[-1][2] + 1 - first))
-            end = n_frames if last else max(cut, first + (kept[-1][2] + 1 if kept else 0))
+            kept = segments[back:] if last else [s for s in segments[back:] if s[1] < cut - origin]
+            if kept and words and kept[0][1] + origin <= words[-1][2]:  # never before the word before ends
+                kept[0] = (kept[0][0], words[-1][2] + 1 - origin, max(kept[0][2], words[-1][2] + 1 - origin))
+            end = n_frames if last else max(cut, origin + (kept[-1][2] + 1 if kept else 0))
             if kept and (with_phones or p in chosen):
-                alignment = _piece_states(decoder, part, segments[:back + len(kept)], end - first, cmn, last)
+                alignment = _piece_states(decoder, part, segments[:back + len(kept)], end - origin, cmn, last)
                 if with_phones:
-                    phones += _phones(alignment, back, len(kept), first, duration)
+                    phones += _phones(alignment, back, len(kept), origin, duration)
                 if p in chosen:
-                    n = min(decoder.n_frames() + first, end) - start
-                    gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[start - first:][:n]
+                    n = min(decoder.n_frames() + origin, end) - start
+                    gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[start - origin:][:n]
                     piece_free = _free_gaps(pcm[start * HOP * 2:end * HOP * 2], n, cmn)
                     free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
-            words += [(w, a + first, b + first) for w, a, b in kept]
+            words += [(w, a + origin, b + origin) for w, a, b in kept]
             start, p = end, p + 1
     if len(words) < len(spoken):
         raise _mismatch("no alignment of its words to the audio exists")
