@@ -214,11 +214,14 @@ def time_animate(wav: Path, txt: Path, model: Path, out: Path, runs: int) -> dic
                                   "-o", out))
         if r["returncode"] != 0:
             raise SystemExit(f"facegen animate failed on {wav}")
+        r["bytes"] = out.stat().st_size
+        for written in {out, out.with_suffix(".wav")} - {wav}:  # each run writes a new file, as a user's run
+            written.unlink(missing_ok=True)  # does (the sidecar of clip.usdc is the input clip.wav: kept)
         results.append(r)
     best = min(results, key=lambda r: r["wall"])
     return {"wall": best["wall"], "median": statistics.median(r["wall"] for r in results),
             "stages": stages_of(best), "rss_mb": (best["profile"] or {}).get("max_rss_mb"),
-            "modules": (best["profile"] or {}).get("heavy_modules", []), "bytes": out.stat().st_size}
+            "modules": (best["profile"] or {}).get("heavy_modules", []), "bytes": best["bytes"]}
 
 
 def import_profile() -> list[tuple[str, float]]:
@@ -505,7 +508,7 @@ def main(argv: list[str] | None = None) -> int:
         r["imports"] = import_profile()
         r["animate"] = {}
         for name, (wav, txt, seconds) in clips.items():
-            a = time_animate(wav, txt, model, folder / f"{wav.stem}.usdc", runs if seconds < 10 else 1)
+            a = time_animate(wav, txt, model, folder / f"{wav.stem}.usdc", runs)
             a.update(audio_seconds=seconds, frames=round(seconds * FPS))
             r["animate"][name] = a
             log(f"animate {name}: {a['wall']:.2f} s wall, stages "
