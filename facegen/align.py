@@ -83,6 +83,9 @@ def _decoder(kind: str):
         except (RuntimeError, ValueError) as exc:
             raise FacegenError(f"cannot start pocketsphinx ({exc}): reinstall it with "
                                "`pip install --force-reinstall pocketsphinx`") from exc
+        except OSError as exc:  # the temporary copy of feat.params (_new_decoder)
+            raise FacegenError(f"cannot write pocketsphinx's settings to a temporary folder ({exc}): set TMPDIR "
+                               "to a writable folder") from exc
         _DECODERS[kind] = decoder
     return _DECODERS[kind]
 

@@ -511,3 +511,18 @@ def test_alignment_of_synthetic_speech_round_trips_through_a_file(tmp_path, corp
     words = align(speech.audio, speech.sample_rate, text)
     back = read_alignment(write_alignment(words, tmp_path / "a.TextGrid", speech.duration), speech.duration)
     assert back == words
+
+
+def test_no_writable_temporary_folder_is_one_clear_error(corpus, monkeypatch):
+    """The decoders read a temporary copy of the acoustic model's feat.params: without a writable temporary
+    folder that is a FacegenError naming the fix, not an OSError."""
+    import facegen.align as align_module
+
+    def unwritable(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", "/tmp/facegen-align-x")
+
+    monkeypatch.setattr(align_module, "_DECODERS", {})
+    monkeypatch.setattr(align_module.tempfile, "TemporaryDirectory", unwritable)
+    text, speech = corpus[0]
+    with pytest.raises(FacegenError, match="set TMPDIR to a writable folder"):
+        align(padded(speech), speech.sample_rate, text)
