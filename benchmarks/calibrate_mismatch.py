@@ -46,12 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     check = align._check_match
 
     def recording(loud, words, gaps, free):
-        in_words = np.zeros(len(loud), bool)
-        for _, first, last in words:
-            in_words[first:last + 1] = True
-        unexplained = float(np.sum(loud & ~in_words)) / max(int(np.sum(loud)), 1)
-        excess = [gaps[f:l + 1].mean() - free[f:l + 1].mean() for _, f, l in words]
-        seen.append((unexplained, float(np.nanmedian(excess))))
+        seen.append(align.match_scores(loud, words, gaps, free))
         return check(loud, words, gaps, free)
 
     align._check_match = recording

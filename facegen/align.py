@@ -6,8 +6,9 @@ pronunciation from libespeak-ng (`facegen.espeak.pronounce`).
 
 Long audio is aligned piece by piece, cut at pauses (`facegen.align_pieces`): each pass costs time that
 grows with the length times the words in reach, and a piece that fails is retried alone with wide beams.
-Every pass hears the same features as one pass over the whole clip would (the clip's cepstral mean, a
-fresh noise estimate): results never depend on earlier calls, and little on where the pieces are cut.
+Every pass subtracts the whole clip's cepstral mean and starts with a fresh noise estimate, so results never
+depend on earlier calls; each piece re-aligns the word before it so that its first onset is found after speech:
+the pieces give the words and phones of one search over the clip.
 """
 
 from __future__ import annotations
@@ -259,17 +260,23 @@ def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.n
     at 10 dB, 53/60 at 5 dB.
     `gaps` and `free` are NaN outside the pieces scored (align_pieces.scored): their words are left out.
     """
+    unexplained, excess = match_scores(loud, words, gaps, free)
+    if unexplained > MAX_UNEXPLAINED:
+        raise _mismatch(f"{unexplained:.0%} of the speech lies outside its words")
+    if excess > MAX_WORD_GAP:
+        raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {MAX_WORD_GAP:.0f}")
+
+
+def match_scores(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray,
+                 free: np.ndarray) -> tuple[float, float]:
+    """The two signs _check_match bounds: the share of loud frames outside the words, and the median word's
+    score gap over the free phone loop (NaN when no scored piece holds a word)."""
     in_words = np.zeros(len(loud), bool)
     for _, first, last in words:
         in_words[first:last + 1] = True
     unexplained = float(np.sum(loud & ~in_words)) / max(int(np.sum(loud)), 1)
-    if unexplained > MAX_UNEXPLAINED:
-        raise _mismatch(f"{unexplained:.0%} of the speech lies outside its words")
     excess = [gaps[f:l + 1].mean() - free[f:l + 1].mean() for _, f, l in words]
-    if not np.all(np.isnan(excess)):
-        excess = float(np.nanmedian(excess))
-        if excess > MAX_WORD_GAP:
-            raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {MAX_WORD_GAP:.0f}")
+    return unexplained, float("nan") if np.all(np.isnan(excess)) else float(np.nanmedian(excess))
 
 
 Phone = tuple[str, float, float]  # (CMU phone, start s, end s)
