@@ -1,0 +1,102 @@
+"""`facegen animate`: one audio clip to one animation file (and a preview video)."""
+
+from __future__ import annotations
+
+import click
+
+from facegen.cli.options import (DEVICE, FiniteRange, morph_targets_option, one_of, progress, protect_inputs,
+                                 read_text, usd_clips_option)
+from facegen.exchange import extensions
+
+
+@click.command()
+@click.argument("audio", type=click.Path(dir_okay=False))
+@click.option("--text", "-t", help="The transcript (words spoken).")
+@click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")
+@click.option("--alignment", type=click.Path(dir_okay=False),
+              help="Word timings you already have: Gentle/WhisperX JSON, TextGrid, JSON or CSV word list.")
+@click.option("--no-text", is_flag=True, help="Use no words at all (zero text features).")
+@click.option("--speaker", "-s",
+              help="Speaking style: a speaker name or index of the model (default: the first).")
+@click.option("--model", "-m", type=click.Path(dir_okay=False),
+              help="Model bundle (default: the built-in model).")
+@click.option("--template", type=click.Path(dir_okay=False),
+              help="A face mesh (PLY/OBJ) with the model's topology to animate instead of its template.")
+@click.option("--text-model",
+              help="Local folder (or cached id) of the text model, if not where the bundle says.")
+@click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
+              help=f"Output file: {' '.join(extensions())}.")
+@click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]),
+              help="USD: time-sampled points (default) or UsdSkel blend shapes (compact, for game engines).")
+@click.option("--usd-clips", metavar="auto|never|N", callback=usd_clips_option,
+              help="USD points: auto (default) writes clips over 2 minutes as value clips in OUTPUT.clips/ "
+                   "(bounded memory), never keeps one file, N writes value clips of N frames.")
+@click.option("--rig", type=click.Choice(["pca", "arkit"]),
+              help="glTF / USD: the morph targets: pca (default: a PCA of the clip, the fewest targets) or "
+                   "arkit (Apple's 52 ARKit blend shapes, named as ARKit names them, with their fitted "
+                   "weights; USD: UsdSkel blend shapes).")
+@click.option("--morph-targets", metavar="K|all", callback=morph_targets_option,
+              help="glTF / USD blendshapes: number of PCA morph targets (default: as many as the tolerance "
+                   "needs), or 'all' for one per frame (short clips).")
+@click.option("--tolerance", type=FiniteRange(0, 1, min_open=True),
+              help="glTF / USD blendshapes: largest vertex error allowed, as a fraction of the face size "
+                   "(default 1e-3).")
+@click.option("--preview", type=click.Path(dir_okay=False),
+              help="Also render a preview video (.mp4) with sound.")
+@click.option("--device", type=DEVICE, default="auto", show_default=True,
+              help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
+def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
+            usd_mode, usd_clips, rig, morph_targets, tolerance, preview, device, quiet):
+    """Animate the face for AUDIO and write OUTPUT."""
+    from facegen.animator import Animator
+    from facegen.atomic import check_writable
+    from facegen.exchange import check_write_options, format_module, format_of, import_writer, write_animation
+    from facegen.exchange.wav import is_same_file, sidecar_path
+
+    one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
+    format_module(output)  # an unknown extension or unwritable folder fails before any work
+    check_writable(output)
+    sidecar = sidecar_path(output)
+    if not is_same_file(audio, sidecar):
+        check_writable(sidecar)
+    protect_inputs([output, sidecar, preview], transcript=text_file,
+                   alignment=alignment, model=model, template=template)
+    options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig),
+                                 ("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None}
+    check_write_options(output, options)
+    if preview:
+        from facegen.render import check_output
+
+        check_output(preview)
+    transcript = read_text(text, text_file)
+    animator = Animator(model, text_model=text_model, device=device)
+    if rig == "arkit" or format_of(output).arkit:  # ARKit weights need the rig's regions: checked before work
+        from facegen.exchange.basis import check_rig
+
+        # the model loads for the check: its transcript's alignment starts first, so the two overlap
+        animator.align_ahead(audio, text=transcript, alignment=alignment, no_text=no_text)
+        check_rig("arkit", animator.mesh(template))
+        if "mode" in format_of(output).options:
+            options.setdefault("mode", "blendshapes")  # USD: the ARKit shapes are UsdSkel blend shapes
+    say = progress(quiet)
+    # writers that read frames block by block: no [T, V, 3] array in memory
+    stream = format_of(output).streams_with(options) and not preview
+    anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
+                            template=template, stream=stream, progress=say, warn=progress(False),
+                            meanwhile=lambda: import_writer(output))
+    written = write_animation(anim, output, audio_source=audio, **options)
+    say(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
+    if preview:
+        from facegen.render import render_animation
+
+        try:
+            result = render_animation(anim, preview, progress=not quiet)
+        except BaseException:  # all or nothing: no animation without the preview asked for
+            for path in written:
+                if not is_same_file(audio, path):
+                    path.unlink(missing_ok=True)
+            raise
+        for note in result.notes:
+            say(note)
+        say(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")

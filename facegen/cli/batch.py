@@ -1,0 +1,60 @@
+"""`facegen batch`: many clips from a manifest, with reports."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from facegen.cli.options import DEVICE
+
+
+@click.command()
+@click.argument("manifest", type=click.Path(dir_okay=False))
+@click.option("--output-dir", "-o", required=True, type=click.Path(file_okay=False),
+              help="Folder for the outputs, the reports (report.json, JUnit report.xml) and the run state.")
+@click.option("--jobs", "-j", type=click.IntRange(min=1),
+              help="Worker processes (Ray: actors) [default: the cores].")
+@click.option("--formats", metavar="EXT,EXT",
+              help="Write every item in these formats from one inference, e.g. usdc,glb,json (default: each "
+                   "row's output).")
+@click.option("--force", is_flag=True, help="Redo items unchanged since the last run (default: skip them).")
+@click.option("--engine", type=click.Choice(["local", "ray"]), default="local", show_default=True,
+              help="local: worker processes on this machine; ray: Ray tasks (pip install 'facegen[ray]').")
+@click.option("--ray-address", metavar="HOST:PORT",
+              help="A running Ray cluster (default: start a local instance).")
+@click.option("--model", "-m", type=click.Path(dir_okay=False),
+              help="Model bundle (default: the built-in model).")
+@click.option("--text-model", help="Local folder (or cached id) of the text model.")
+@click.option("--device", type=DEVICE, default="auto", show_default=True)
+@click.option("--batch-size", type=click.IntRange(min=1), default=16, show_default=True,
+              help="Clips of a worker run through the network at once.")
+@click.option("--ext", default=".usdc", show_default=True, help="Output format for rows without an output.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model, text_model, device,
+          batch_size, ext, quiet):
+    """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment,
+    speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
+    are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed."""
+    from facegen.batch_run import run_manifest
+    from facegen.runtime import progress_bar
+
+    bars = []  # made once the plan says how many items there are
+
+    def planned(total: int, _to_run: int) -> None:
+        bars.append(progress_bar(total=total, desc="batch", unit="clip", enabled=not quiet, leave=False))
+
+    try:
+        outcome = run_manifest(manifest, output_dir, jobs=jobs, formats=formats, force=force, engine=engine,
+                               ray_address=ray_address, model=model, text_model=text_model, device=device,
+                               batch_size=batch_size, default_ext=ext, on_plan=planned,
+                               on_result=lambda _r: bars and bars[0].update(1))
+    finally:
+        for bar in bars:
+            bar.close()
+    for r in outcome.results:
+        if r.status in ("failed", "error"):
+            why = r.error or "; ".join(f for v in r.validation for f in v["failures"])
+            click.echo(f"facegen: line {r.job.line}: {r.job.output}: {r.status}: {why}", err=True)
+    click.echo(outcome.summary)
+    sys.exit(0 if outcome.ok else 1)

@@ -1,0 +1,137 @@
+"""`facegen info`, `facegen train`, `facegen evaluate`: model bundles."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from facegen.cli.options import DEVICE, WEIGHT, FiniteRange, split_options, splits
+
+
+@click.command()
+@click.argument("bundle", required=False, type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print the metadata as JSON.")
+def info(bundle, as_json):
+    """Describe a model BUNDLE (default: the built-in model)."""
+    from facegen.bundle import default_bundle_path, read_metadata
+
+    path = Path(bundle) if bundle else default_bundle_path()
+    meta = read_metadata(path)
+    if as_json:
+        click.echo(json.dumps(meta, indent=2))
+        return
+    cfg, feat, topo = meta["model_config"], meta["feature_config"], meta["topology"]
+    regions = ", ".join(f"{k} ({v} vertices)" for k, v in meta.get("regions", {}).items())
+    lines = [
+        f"model bundle   {path}",
+        f"format         {meta['format_version']}",
+        f"network        modalities={cfg['modalities']} fusion={cfg['fusion']} text_dim={cfg['text_dim']}"
+        + (f" phone stream ({cfg['n_phones']} phones)" if cfg.get('n_phones') else ""),
+        f"text backend   {meta['text_backend']['id']} ({meta['text_backend']['dim']}-d)",
+        f"audio          {feat['n_mels']} mel bands, {feat['sample_rate']} Hz, {feat['fps']:g} fps",
+        f"speakers       {', '.join(f'{i}={s}' for i, s in enumerate(meta['speakers']))}",
+        f"topology       {topo['num_vertices']} vertices, {topo['num_faces']} faces, "
+        f"fingerprint {topo['fingerprint']}",
+        f"regions        {regions or 'none'}",
+    ]
+    for k, v in meta.get("provenance", {}).items():
+        if k == "history":
+            v = f"{len(v)} epochs of train/val loss (see --json)"
+        lines.append(f"{k:<14} {json.dumps(v) if isinstance(v, dict | list) else v}")
+    click.echo("\n".join(lines))
+
+
+@click.command()
+@click.argument("data", type=click.Path(file_okay=False))
+@click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
+              help="The model bundle to write.")
+@click.option("--text-backend", default="minilm", show_default=True,
+              help="minilm (offline default), gpt2 (the paper's), or a Hugging Face id / local folder.")
+@click.option("--text-model", type=click.Path(), help="Local folder with the text model's weights.")
+@click.option("--modalities", type=click.Choice(["both", "audio", "text"]), default="both", show_default=True)
+@click.option("--fusion", type=click.Choice(["tensor", "concat"]), default="tensor", show_default=True)
+@click.option("--epochs", type=click.IntRange(min=1), default=100, show_default=True)
+@click.option("--lr", type=FiniteRange(0, 10, min_open=True), default=1e-4, show_default=True)
+@click.option("--batch-size", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option("--seed", default=0, show_default=True)
+@click.option("--device", type=DEVICE, default="auto", show_default=True)
+@click.option("--resume", is_flag=True,
+              help="Continue from the last checkpoint (after a kill or with more epochs).")
+@click.option("--checkpoint-dir", type=click.Path(file_okay=False), help="Default: OUTPUT's name + '.ckpt/'.")
+@click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default="fp32", show_default=True,
+              help="How the bundle stores its weights.")
+@click.option("--threads", type=click.IntRange(1, 1024), help="CPU threads for torch (default: all cores).")
+@click.option("--strict", is_flag=True,
+              help="Refuse to train when a sequence is missing or corrupt (default: skip it).")
+@click.option("--output-layer", "output_layer", type=click.Choice(["full", "pca"]), default="full",
+              show_default=True,
+              help="full: the paper's FC 3V; pca: the same layer trained in a PCA basis of the training "
+                   "motion.")
+@click.option("--basis", type=click.IntRange(min=1), default=64, show_default=True,
+              help="Dimensions of the PCA basis (--output-layer pca).")
+@click.option("--lip-weight", type=WEIGHT, default=0.0, show_default=True,
+              help="Extra loss on the lip vertices (pca only).")
+@click.option("--velocity-weight", type=WEIGHT, default=0.0, show_default=True,
+              help="Loss on frame-to-frame motion (pca only).")
+@click.option("--upper-weight", type=WEIGHT, default=0.0, show_default=True,
+              help="Extra loss on the upper-face vertices (pca only).")
+@click.option("--patience", type=click.IntRange(min=1),
+              help="Stop after this many epochs without a better validation loss.")
+@click.option("--phones", is_flag=True, help="Add the phone stream (per-frame phones) to the audio encoder.")
+@split_options
+@click.option("--quiet", "-q", is_flag=True)
+def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device,
+          resume, checkpoint_dir, precision, threads, strict, output_layer, basis, lip_weight,
+          velocity_weight, upper_weight, patience, phones, train_subjects, test_subjects, train_sentences,
+          val_sentences, test_sentences, quiet):
+    """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
+    import os
+
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # busy-waiting OpenMP threads stall on shared cores
+    from facegen.train import train as run
+
+    chosen = splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
+    result = run(data, output, text_backend=text_backend, text_model_path=text_model, modalities=modalities,
+                 fusion=fusion, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, device=device,
+                 resume=resume, splits=chosen, checkpoint_dir=checkpoint_dir, precision=precision,
+                 threads=threads, on_bad="fail" if strict else "skip", quiet=quiet, output=output_layer,
+                 basis=basis, lip_weight=lip_weight, velocity_weight=velocity_weight,
+                 upper_weight=upper_weight, patience=patience, phones=phones)
+    click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs,
+                           "best_epoch": result.best_epoch, "best_loss": result.best_loss,
+                           "seconds": round(result.seconds, 1),
+                           "curves": str(result.curves_csv), "skipped": len(result.skipped)}))
+
+
+@click.command()
+@click.argument("bundle", type=click.Path(dir_okay=False))
+@click.argument("data", type=click.Path(file_okay=False))
+@click.option("--split", type=click.Choice(["test-a", "test-b", "val", "train"]), default="test-a",
+              show_default=True)
+@click.option("--text-model", type=click.Path(), help="Local folder with the text model's weights.")
+@click.option("--device", type=DEVICE, default="cpu", show_default=True)
+@split_options
+@click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
+@click.option("--plots", type=click.Path(file_okay=False),
+              help="Also write the paper's analysis figures (PNG) into this folder.")
+@click.option("--strict", is_flag=True, help="Fail on a missing or corrupt sequence (default: skip it).")
+@click.option("--quiet", "-q", is_flag=True)
+def evaluate(bundle, data, split, text_model, device, train_subjects, test_subjects, train_sentences,
+             val_sentences, test_sentences, as_json, plots, strict, quiet):
+    """Evaluate a model BUNDLE on a split of the dataset DATA: LVE, FDD, vertex errors."""
+    from facegen.evaluate import evaluate as run
+    from facegen.evaluate import format_table
+
+    given = (train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
+    chosen = splits(*given) if any(v is not None for v in given) else None
+    result = run(bundle, data, split, splits=chosen, text_model_path=text_model, device=device,
+                 on_bad="fail" if strict else "skip", quiet=quiet)
+    click.echo(json.dumps(result, indent=1) if as_json else format_table(result))
+    if plots:
+        from facegen.plots import write_plots
+
+        for path in write_plots(bundle, data, plots, split=split, splits=chosen, text_model_path=text_model,
+                                device=device, quiet=quiet):
+            click.echo(f"facegen: wrote {path}", err=True)
