@@ -1,7 +1,7 @@
 """The corpus's words: the lexicon (classes, roles, held-out words) and the generated sentences (e49 on)."""
 
 import collections
-import random
+import re
 
 import pytest
 
@@ -131,7 +131,21 @@ def test_sequence_names_of_generated_sentences(corpus):
     assert sequence_name("F2", 49) == "F2_e49" and sequence_name("M1", max(sentences)) == "M1_e2448"
 
 
-def test_examples_read_naturally(corpus):  # prints a sample (pytest -s) for a human to judge
+ARTICLE_EXCEPTIONS = {"hour", "honest", "honour", "heir"}  # "an" before a silent h
+
+
+def test_sentences_read_naturally(corpus):
+    """Every sentence and neutral twin is one well-formed sentence: a capital first, single spaces, one
+    final . ? or !, no word twice in a row, "a"/"an" agreeing with the next word, "was"/"were" with the
+    pronoun before it."""
     sentences, splits = corpus
-    for n in sorted(random.Random(0).sample(sorted(sentences), 20)):
-        print(f"e{n:02d}", sentences[n], f"|| {neutral_twin(n)}" if n in splits["test-unseen"] else "")
+    texts = {**{f"e{n:02d}": t for n, t in {**SENTENCES, **sentences}.items()},
+             **{f"twin of e{n:02d}": neutral_twin(n) for n in splits["test-unseen"]}}
+    for name, text in texts.items():
+        assert re.fullmatch(r"[A-Z][^ ?!]*( [^ ?!]+)*[.?!]", text), f"{name} is not one sentence: {text!r}"
+        assert not re.search(r"\b(\w+) \1\b", text, re.IGNORECASE), f"{name} repeats a word: {text!r}"
+        for article, word in re.findall(r"\b(a|an) (\w+)", text, re.IGNORECASE):
+            vowel = word[0].lower() in "aeiou" or word.lower() in ARTICLE_EXCEPTIONS
+            assert vowel == (article.lower() == "an"), f"{name}: {article} {word}: {text!r}"
+        disagree = re.search(r"\b(he|she|it) were\b|\b(we|they|you) was\b", text, re.IGNORECASE)
+        assert not disagree, f"{name}: {disagree.group()}: {text!r}"
