@@ -18,21 +18,22 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _API = {
-    "animate": "facegen.pipeline",
+    "animate": "facegen.animator",
+    "Animator": "facegen.animator",
     "load_bundle": "facegen.bundle",
     "Animation": "facegen.animation",
     "read_animation": "facegen.exchange",
     "write_animation": "facegen.exchange",
     "FacegenError": "facegen.errors",
 }
-__all__ = ["Animation", "FacegenError", "__version__", "animate", "load_bundle", "read_animation", "write_animation"]
+__all__ = ["Animation", "Animator", "FacegenError", "__version__", "animate", "load_bundle", "read_animation", "write_animation"]
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
     from facegen.bundle import load_bundle
     from facegen.errors import FacegenError
     from facegen.exchange import read_animation, write_animation
-    from facegen.pipeline import animate
+    from facegen.animator import Animator, animate
 
 
 def __getattr__(name: str):

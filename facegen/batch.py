@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from facegen.align_ahead import Aligned
+from facegen.animator import BATCH_SIZE, Animator
 from facegen.errors import FacegenError
-from facegen.exchange import format_of, write_animation
+from facegen.exchange import format_of, format_of_extension, write_animation
 from facegen.runtime import Say, silent
 
 
@@ -111,7 +112,7 @@ def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = No
         raise FacegenError(f"cannot read manifest {path} ({exc}): pass a UTF-8 CSV or JSON file") from exc
     rows = _json_rows(raw, path) if raw.lstrip().startswith(("[", "{")) else _csv_rows(raw, path)
     for ext in formats or ():
-        format_of(f"x{ext}")
+        format_of_extension(ext)
     base = path.parent
     out_base = Path(outdir) if outdir is not None else base
     jobs = [_job(row, line, path, base, out_base, default_ext, formats) for line, row in rows]
@@ -253,33 +254,24 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
                speaker=row.get("speaker") or None, line=line, outputs=outputs, problem=problem)
 
 
-def animate_many(jobs: Iterable[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-                 batch_size: int = 16, window: int = 64, say: Say = silent,
-                 warn: Say = silent) -> Iterator[tuple[Job, object]]:
-    """Animate many clips with the model and text backend loaded once: yields (job, Animation) or
-    (job, FacegenError) for every job, in the input order within windows of `window` jobs.
+def animate_many(jobs: Iterable[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,
+                 window: int = 64, warn: Say = silent) -> Iterator[tuple[Job, object]]:
+    """Animate many clips with one Animator (the built-in model on the CPU or GPU if None): yields
+    (job, Animation) or (job, FacegenError) for every job, in the input order within windows of `window` jobs.
 
-    Within a window, clips are sorted by length and run through the decoder BiLSTMs `batch_size` at a
-    time (packed: each clip's result equals its own single run). The frames of each Animation are a
-    FrameStream (computed when the writer reads them).
+    Within a window, the clips run through the decoder BiLSTMs `batch_size` at a time (Animator.run: packed,
+    each clip's result equals its own single run). The frames of each Animation are a FrameStream (computed
+    when the writer reads them).
     """
-    for job, anim, _, _ in _animate_timed(jobs, bundle=bundle, device=device, text_model=text_model,
-                                          batch_size=batch_size, window=window, warn=warn):
+    for job, anim, _, _ in _animate_timed(jobs, animator=animator or Animator(), batch_size=batch_size,
+                                          window=window, warn=warn):
         yield job, anim
 
 
-def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str | None, batch_size: int,
-                   window: int, warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
+def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, window: int,
+                   warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
     """animate_many's (job, Animation or FacegenError) with the (wall, CPU) seconds spent on each job's
     preparation and its share of the network, and the notes said while preparing it (also passed to `warn`)."""
-    from facegen.bundle import Bundle, load_bundle  # torch: imported when clips run, not to read a manifest
-    from facegen.inference import batch_decoder_states, frame_stream
-    from facegen.pipeline import finish_animation, prepare_clip
-    from facegen.runtime import select_device
-
-    if not isinstance(bundle, Bundle):
-        bundle = load_bundle(bundle)
-    dev = select_device(device)
     pending: list[Job] = []
 
     def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object, float, list[str]]]:
@@ -297,9 +289,9 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
             try:
                 if job.problem:
                     raise FacegenError(job.problem)
-                prepared[i] = prepare_clip(job.audio, bundle=bundle, text=job.text, alignment=job.alignment,
-                                           no_text=job.no_text, speaker=job.speaker, text_model=text_model,
-                                           warn=note, ahead=job.aligned)
+                prepared[i] = animator.prepare(job.audio, text=job.text, alignment=job.alignment,
+                                               no_text=job.no_text, speaker=job.speaker, warn=note,
+                                               aligned=job.aligned)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error
@@ -312,11 +304,8 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
         for b in range(0, len(ready), batch_size):
             ids = ready[b:b + batch_size]
             t0 = _clocks()
-            clips = [prepared[i] for i in ids]
-            states = batch_decoder_states(bundle, [(c.mel, c.text_features, c.speaker, c.phones) for c in clips],
-                                          device=dev)
-            for i, clip, st in zip(ids, clips, states, strict=True):
-                prepared[i] = finish_animation(bundle, clip, frame_stream(bundle, st, clip.mesh.vertices))
+            for i, anim in zip(ids, animator.run([prepared[i] for i in ids], batch_size=batch_size), strict=True):
+                prepared[i] = anim
                 seconds[i] += (_clocks() - t0) / len(ids)
         for i, job in enumerate(window_jobs):
             yield job, prepared[i], seconds[i], notes[i]
@@ -330,17 +319,16 @@ def _animate_timed(jobs: Iterable[Job], *, bundle, device: str, text_model: str 
         yield from run(pending)
 
 
-def run_batch(jobs: Sequence[Job], *, bundle=None, device: str = "auto", text_model: str | None = None,
-              batch_size: int = 16, validate: bool = True, say: Say = silent, warn: Say = silent) -> list[JobResult]:
+def run_batch(jobs: Sequence[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,
+              validate: bool = True, say: Say = silent, warn: Say = silent) -> list[JobResult]:
     """Animate every job and write each of its targets (format from the extension) from one inference, then
     (`validate`) check each file as `facegen validate` does. A clip that fails is reported in its JobResult
     and the others go on; notes (e.g. "no transcript given") go to `warn` and into the result. Returns one
     JobResult per job, in order."""
     results = []
     start = time.perf_counter()
-    for n, (job, anim, prep, notes) in enumerate(_animate_timed(jobs, bundle=bundle, device=device,
-                                                                text_model=text_model, batch_size=batch_size,
-                                                                window=64, warn=warn), 1):
+    timed = _animate_timed(jobs, animator=animator or Animator(), batch_size=batch_size, window=64, warn=warn)
+    for n, (job, anim, prep, notes) in enumerate(timed, 1):
         t0 = _clocks()
         result = JobResult(job, notes=notes)
         if isinstance(anim, FacegenError):

@@ -36,14 +36,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
+from facegen.animator import Animator, NetworkInput
 from facegen.datasets.biwi import Dataset, Item
 from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
+from facegen.face.regions import LIPS, UPPER_FACE, file_stem
 from facegen.lipsync import pool_lipsync
-from facegen.runtime import Say, progress_bar, select_device, warn_stderr
+from facegen.runtime import Say, progress_bar, warn_stderr
 
 if TYPE_CHECKING:
     from facegen.bundle import Bundle
@@ -104,7 +105,9 @@ def pool(rows: list[dict]) -> dict:
     return out
 
 
-def _region(dataset: Dataset, bundle, name: str, file: str, num_vertices: int) -> np.ndarray:
+def _region(dataset: Dataset, bundle, name: str, num_vertices: int) -> np.ndarray:
+    """The vertex indices of region `name`: the dataset's region file, else the bundle's template's."""
+    file = f"{file_stem(name)}.txt"
     idx = dataset.regions.get(name)
     if idx is None:
         idx = bundle.template.regions.get(name)
@@ -119,15 +122,18 @@ def _region(dataset: Dataset, bundle, name: str, file: str, num_vertices: int) -
 
 @dataclass
 class Run:
-    """A bundle ready to predict the usable sequences of a dataset split (see `prepare`)."""
+    """An Animator ready to predict the usable sequences of a dataset split (see `prepare`)."""
 
-    bundle: Bundle
+    animator: Animator
     dataset: Dataset
     split: str
     items: list[Item]
-    device: torch.device
     lips: np.ndarray  # vertex indices of the lip region
     upper: np.ndarray  # vertex indices of the upper-face region
+
+    @property
+    def bundle(self) -> Bundle:
+        return self.animator.bundle
 
     def conditions(self, item: Item) -> list[int]:
         """Speaker indices to condition `item` on: its own speaker, or every speaker for test B."""
@@ -139,19 +145,8 @@ class Run:
                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Offsets [T, V, 3] of `item` conditioned on speaker `condition`; with `encoders`, also the
         encoder outputs ("audio" Ha [T, 128] and/or "text" Hl [T, 64]) as float32 arrays."""
-        model = self.bundle.model
-        dev = self.device
-        with torch.inference_mode():
-            mel = torch.from_numpy(item.mel)[None].to(dev)
-            text = None if item.text is None else torch.from_numpy(item.text)[None].to(dev)
-            speaker = model.speaker_one_hot(condition).to(dev)
-            phones = None
-            if model.cfg.n_phones:
-                phones = torch.from_numpy(item.phones)[None].to(dev)
-            offsets = model(mel, text, speaker, phones)[0].cpu().numpy()
-            enc = ({k: v[0].float().cpu().numpy() for k, v in model.encode(mel, text, speaker, phones).items()}
-                   if encoders else {})
-        return offsets, enc
+        inputs = NetworkInput(item.mel, item.text, condition, item.phones if self.bundle.config.n_phones else None)
+        return self.animator.offsets(inputs), self.animator.encoders(inputs) if encoders else {}
 
 
 def prepare(
@@ -172,23 +167,17 @@ def prepare(
     `splits` defaults to the split the bundle was trained with (its provenance), else the community's
     with the bundle's speakers as training subjects.
     """
-    from facegen.bundle import load_bundle
-
     check_split(split)
-    bundle = load_bundle(bundle_path)
-    dev = select_device(device)
+    animator = Animator(bundle_path, text_model=text_model_path, device=device)
+    bundle = animator.bundle
+    animator.device  # noqa: B018 - an unusable explicit device fails before the features are computed
     if splits is None:
         known = bundle.provenance.get("split")
         splits = Splits.from_dict(known) if known else Splits(train_subjects=tuple(bundle.speakers),
                                                                    test_subjects=())
     dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, warn=warn)
     cfg = bundle.config
-    backend = None
-    if cfg.uses_text:
-        from facegen.text import check_text_dim, load_text_backend
-
-        backend = load_text_backend(bundle.text_backend, text_model_path)
-        check_text_dim(backend, cfg.text_dim, bundle.text_backend)
+    backend = animator.text_backend() if cfg.uses_text else None
     sequences = dataset.split(split, splits)
     if split != "test-b":
         strangers = sorted({s.subject for s in sequences} - set(bundle.speakers))
@@ -215,10 +204,10 @@ def prepare(
         if not items:
             raise FacegenError(f"no sequence of split {split} in {dataset.root} has phone timings or a transcript "
                                "for this model's phone stream: add text/ transcripts")
-    lips = _region(dataset, bundle, "lips", "lve.txt", num_vertices)
-    upper = _region(dataset, bundle, "upper_face", "fdd.txt", num_vertices)
-    bundle.model.to(dev).eval()
-    return Run(bundle, dataset, split, items, dev, lips, upper)
+    lips = _region(dataset, bundle, LIPS, num_vertices)
+    upper = _region(dataset, bundle, UPPER_FACE, num_vertices)
+    bundle.model.eval()
+    return Run(animator, dataset, split, items, lips, upper)
 
 
 def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike, split: str = "test-a",

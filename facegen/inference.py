@@ -72,7 +72,7 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_
                 if rest and rest[0] is not None:
                     phones = rest[0]
                 else:
-                    from facegen.phones import silence
+                    from facegen.phonetics import silence
 
                     phones = silence(T)
                 if phones.shape != (T, cfg.n_phones):
@@ -220,11 +220,11 @@ class FrameStream:
 def frame_stream(bundle, states, template: np.ndarray | None = None,
                  block_frames: int = BLOCK_FRAMES) -> FrameStream:
     """Frames = template + offsets from decoder `states` (template None: offsets only)."""
-    fc = bundle.model.fc_out
-    base = fc.bias.detach().cpu().numpy().astype(np.float32)
+    weight, bias = bundle.model.output_layer()
+    base = bias.detach().cpu().numpy().astype(np.float32)
     if template is not None:
         base = base + np.asarray(template, np.float32).reshape(-1)
-    return FrameStream(states, fc.weight, base, block_frames)
+    return FrameStream(states, weight, base, block_frames)
 
 
 def predict_frames(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *,

@@ -184,16 +184,23 @@ class FaceModel(nn.Module):
             self.basis.copy_(basis)
             self.basis_mean.copy_(mean)
 
+    def output_layer(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The output layer as the paper's plain FC 3V, (weight [3V, 2 * lstm_dim], bias [3V]): offsets =
+        states @ weight.T + bias. A model with a PCA output (`output_basis`) gives it folded through its basis
+        (weight B W, bias B b + m); what inference reads, whichever way the model was trained."""
+        if not self.cfg.output_basis:
+            return self.fc_out.weight, self.fc_out.bias
+        with torch.no_grad():
+            return self.basis @ self.fc_out.weight, self.basis @ self.fc_out.bias + self.basis_mean
+
     def folded(self) -> FaceModel:
-        """The same network with the plain FC 3V output layer (weight B W, bias B b + m): what bundles store."""
+        """The same network with the plain FC 3V output layer (`output_layer`): what bundles store."""
         if not self.cfg.output_basis:
             return self
         cfg = ModelConfig.from_dict({**self.cfg.to_dict(), "output_basis": 0})
         full = FaceModel(cfg)
         state = {k: v for k, v in self.state_dict().items() if not k.startswith(("fc_out.", "basis"))}
-        with torch.no_grad():
-            state["fc_out.weight"] = self.basis @ self.fc_out.weight
-            state["fc_out.bias"] = self.basis @ self.fc_out.bias + self.basis_mean
+        state["fc_out.weight"], state["fc_out.bias"] = self.output_layer()
         full.load_state_dict(state)
         return full.to(self.basis.device).train(self.training)
 

@@ -147,10 +147,11 @@ def test_while_the_alignment_runs_the_word_vectors_are_computed_and_meanwhile_ca
     import facegen.text
     from facegen.bundle import load_bundle
     from facegen.exchange import import_writer
-    from facegen.pipeline import prepare_clip
+    from facegen.animator import Animator
 
-    bundle = load_bundle()
-    later = prepare_clip(WAV, bundle=bundle, text=TEXT)
+    animator = Animator(load_bundle())
+    bundle = animator.bundle
+    later = animator.prepare(WAV, text=TEXT)
     found = align_ahead.align_file(WAV, TEXT, with_phones=bool(bundle.config.n_phones))
 
     class Running(align_ahead.Aligned):
@@ -163,8 +164,8 @@ def test_while_the_alignment_runs_the_word_vectors_are_computed_and_meanwhile_ca
     called = []
     monkeypatch.setattr(facegen.text, "text_features", no_late_features)
     meanwhile = Running(found.words, found.phones)
-    clip = prepare_clip(WAV, bundle=bundle, text=TEXT, ahead=meanwhile,
-                        meanwhile=lambda: called.append(import_writer("out.usdc")))
+    clip = animator.prepare(WAV, text=TEXT, aligned=meanwhile,
+                            meanwhile=lambda: called.append(import_writer("out.usdc")))
     assert called == [None] and "pxr.UsdGeom" in sys.modules and "pxr.UsdMedia" in sys.modules
     assert clip.words == later.words
     assert np.array_equal(clip.text_features, later.text_features) and np.array_equal(clip.phones, later.phones)

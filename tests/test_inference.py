@@ -15,6 +15,7 @@ import soundfile as sf
 import torch
 from helpers import make_bundle
 
+from facegen.animator import Animator
 from facegen.batch import Job, animate_many, read_manifest
 from facegen.errors import FacegenError
 from facegen.inference import FrameStream, decoder_states, frame_stream, predict_frames
@@ -28,7 +29,7 @@ SENTENCES = ("What an excellent room you have, sir.", "Such expensive furnishing
 
 @pytest.fixture(scope="module")
 def face():
-    from facegen.synth.face import make_face
+    from facegen.face.procedural import make_face
 
     return make_face()  # the procedural face: 23,370 vertices in the BIWI layout, no ../shared needed
 
@@ -86,8 +87,7 @@ def test_default_model_blockwise_equals_one_pass(clips):
     from facegen.audio import load_audio, mel_features
     from facegen.bundle import default_bundle_path, load_bundle
 
-    if not default_bundle_path().is_file():
-        pytest.skip("the built-in default model is not built yet")
+    assert default_bundle_path().is_file(), "the built-in default model is committed: it must be there"
     bundle = load_bundle()
     wav = clips[1][2][0]
     mel = mel_features(*load_audio(wav), bundle.features, bundle.mel_filters)
@@ -138,7 +138,7 @@ MEMORY_SCRIPT = textwrap.dedent("""
     sys.path.insert(0, {tests!r})
     from helpers import make_bundle
     from facegen.inference import predict_frames
-    from facegen.synth.face import make_face
+    from facegen.face.procedural import make_face
     torch.set_num_threads(2)
     face = make_face()
     bundle = make_bundle(face, None, speakers=("A",), small=False, scale=0.02)
@@ -225,13 +225,13 @@ def test_device_cuda_without_gpu_is_a_user_error(clips, tmp_path):
 
 
 def test_batch_equals_individual(bundle, clips):
-    from facegen.pipeline import animate
+    from facegen import animate
 
     _, items = clips
     jobs = [Job(audio=wav, output=wav.with_suffix(".npy"), alignment=words, speaker=str(i % 3))
             for i, (wav, words) in enumerate(items)]
     jobs.append(Job(audio=items[0][0].with_name("missing.wav"), output=Path("x.npy")))
-    results = list(animate_many(jobs, bundle=bundle, device="cpu", batch_size=2))
+    results = list(animate_many(jobs, animator=Animator(bundle, device="cpu"), batch_size=2))
     assert [job for job, _ in results] == jobs
     assert isinstance(results[-1][1], FacegenError) and "does not exist" in str(results[-1][1])
     for job, anim in results[:-1]:
@@ -253,7 +253,7 @@ def test_run_batch_writes_every_output_and_reports_failures(bundle, clips, tmp_p
             for wav, words in items[:2]]
     jobs.append(Job(audio=items[2][0], output=tmp_path / "out" / "bad.npy", alignment=items[2][1], speaker="Z9"))
     said = []
-    results = run_batch(jobs, bundle=bundle, device="cpu", say=said.append)
+    results = run_batch(jobs, animator=Animator(bundle, device="cpu"), say=said.append)
     assert [r.ok for r in results] == [True, True, False] and "unknown speaker" in results[2].error
     for r in results[:2]:
         assert r.files == [r.job.output, r.job.output.with_suffix(".wav")]

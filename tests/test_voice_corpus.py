@@ -105,9 +105,10 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
     """A model with the phone stream: trained on the corpus's phone timings; at inference its phones come
     from pocketsphinx's phone alignment of --text, or from an alignment file that lists them."""
     from facegen.datasets.splits import Splits
-    from facegen.pipeline import animate
+    from facegen import animate
     from facegen.train import train
-    from facegen.words import Word, write_alignment
+    from facegen.alignment_files import write_alignment
+    from facegen.words import Word
 
     out, manifest = corpus
     train_names = [n for n, e in manifest["done"].items() if e["split"] in ("train", "val", "test")]

@@ -3,34 +3,33 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import click
 
+from facegen.cli.command import Command
 from facegen.cli.options import one_of, progress, protect_inputs, read_text
 from facegen.errors import FacegenError
 
 
-@click.command()
+@click.command(cls=Command)
 @click.argument("audio", type=click.Path(dir_okay=False))
 @click.option("--text", "-t", help="The transcript.")
 @click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")
 @click.option("--output", "-o", type=click.Path(dir_okay=False),
-              help="words.json or words.TextGrid (default: JSON on stdout).")
+              help="words.json, words.TextGrid or words.csv (default: JSON on stdout).")
 @click.option("--phones", is_flag=True,
               help="Also write each word's phones (CMU, pocketsphinx phone alignment): a `phones` list / "
                    "tier.")
 def align(audio, text, text_file, output, phones):
     """Find when each word (and with --phones each phone) of the transcript is spoken in AUDIO."""
+    from facegen.alignment_files import alignment_format, alignment_json, write_alignment
     from facegen.audio import check_speech, load_audio
     from facegen.word_timing import clip_words
-    from facegen.words import alignment_json, write_alignment
 
     one_of(text=text, text_file=text_file)
     protect_inputs([output], audio=audio, transcript=text_file)
-    if output and Path(output).suffix.lower() not in (".json", ".textgrid"):
-        raise FacegenError(f"cannot write alignments as {Path(output).suffix or 'no extension'}: "
-                           "use .json or .TextGrid")
+    if output:
+        alignment_format(output, phones)  # a name facegen writes (with phones: one that holds them)
     samples, sr = load_audio(audio)
     check_speech(samples, sr, 25.0, name=f"audio file {audio}")
     transcript = read_text(text, text_file)

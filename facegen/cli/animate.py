@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import click
 
+from facegen.cli.command import Command
 from facegen.cli.options import (DEVICE, FiniteRange, morph_targets_option, one_of, progress, protect_inputs,
                                  read_text, usd_clips_option)
 from facegen.exchange import extensions
 
 
-@click.command()
+@click.command(cls=Command)
 @click.argument("audio", type=click.Path(dir_okay=False))
 @click.option("--text", "-t", help="The transcript (words spoken).")
 @click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")

@@ -1,0 +1,360 @@
+"""The Animator: one object owns a run of the network — the model bundle, its text backend, the device and how
+a clip's words are timed — and is the one way facegen runs the network (as demucs's `Separator` or whisper's
+model + `transcribe`). `facegen.animate`, `facegen animate`, batches, `facegen evaluate` and the analysis
+plots all go through it:
+
+    animator = Animator()                              # the built-in model, loaded when first needed
+    clip = animator.prepare("line.wav", text="...")    # audio, word timings, features: a Clip
+    [animation] = animator.run([clip])                 # the network (packed over many clips)
+    animation = animator.animate("line.wav", text="...")   # both in one call
+
+Alignment started ahead: in a process that has not imported torch yet (a new `facegen animate`, a script's
+first call), the forced alignment of the transcript runs in a forked process while this one imports torch and
+loads the model (align_ahead.py): the same words, sooner. `animate` does this by itself; a caller with work of
+its own to do first (the CLI checks the template's rig) calls `align_ahead` early and `animate` later.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from facegen.align_ahead import AlignAhead, Aligned
+from facegen.animation import Animation
+from facegen.audio import check_speech, load_audio, mel_features, num_frames
+from facegen.errors import FacegenError
+from facegen.face.mesh import Mesh, check_topology, read_mesh
+from facegen.runtime import PROFILE, Say, select_device, silent
+from facegen.word_timing import NONE, clip_words, clip_words_and_phones, force_aligned
+
+LONG_INPUT_SECONDS = 20.0  # stage-by-stage progress is reported for clips at least this long
+BATCH_SIZE = 16  # clips whose decoder BiLSTMs run as one packed batch
+
+
+@dataclass
+class NetworkInput:
+    """What the network reads for one clip: mel [T, n_mels], text features [T, text_dim] or None (zeros),
+    the speaker index, and phones [T, P] one-hot (models with a phone stream; None: silence)."""
+
+    mel: np.ndarray
+    text_features: np.ndarray | None
+    speaker: int
+    phones: np.ndarray | None = None
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.mel.shape[0])
+
+
+@dataclass
+class Clip(NetworkInput):
+    """A prepared clip: the network's inputs and what its Animation needs besides the frames."""
+
+    audio_name: str = ""
+    samples: np.ndarray | None = None
+    sample_rate: int = 0
+    words: list | None = None
+    word_timing: str = NONE
+    mesh: Mesh | None = None
+
+
+class Animator:
+    """A run of the network: `model` (a loaded Bundle, a bundle path, or None for the built-in model, loaded
+    when first needed), `text_model` (where the bundle's text model is, if not where it says), `device`
+    ("auto": a CUDA GPU when torch sees one, else the CPU; "cpu"; "cuda": a FacegenError without a GPU)."""
+
+    def __init__(self, model=None, *, text_model: str | None = None, device: str = "auto") -> None:
+        from facegen.bundle import Bundle  # torch-free: bundle.py imports torch inside its loaders
+
+        self._bundle = model if isinstance(model, Bundle) else None
+        self._model_path = None if self._bundle is not None else model
+        self.text_model = text_model
+        self._device_name = device
+        self._device = None
+        self._backend = None
+        self._ahead: tuple[tuple, AlignAhead] | None = None
+
+    # ------------------------------------------------------------------------------------------ the run's parts
+
+    @property
+    def device(self):
+        """The torch device (chosen on first use: that imports torch)."""
+        if self._device is None:
+            self._device = select_device(self._device_name)
+        return self._device
+
+    @property
+    def bundle(self):
+        """The model bundle (loaded on first use)."""
+        if self._bundle is None:
+            from facegen.bundle import load_bundle
+
+            with PROFILE.stage("model_load"):
+                self._bundle = load_bundle(self._model_path)
+        return self._bundle
+
+    def text_backend(self):
+        """The bundle's text model (loaded once), checked against the bundle."""
+        if self._backend is None:
+            from facegen.text import check_text_dim, load_text_backend
+
+            bundle = self.bundle
+            with PROFILE.stage("text_model_load"):
+                backend = load_text_backend(bundle.text_backend, self.text_model)
+            check_text_dim(backend, bundle.config.text_dim, bundle.text_backend)
+            self._backend = backend
+        return self._backend
+
+    def mesh(self, template: str | os.PathLike | Mesh | None = None) -> Mesh:
+        """The face to animate: the bundle's template, or a user mesh of the same topology (refused otherwise)."""
+        base = self.bundle.template
+        if template is None:
+            return base
+        mesh = template if isinstance(template, Mesh) else read_mesh(template)
+        check_topology(mesh, base.num_vertices, base.faces, f"template {template}")
+        return Mesh(mesh.vertices, base.faces, base.regions)
+
+    def word_alignment(self) -> str | None:
+        """What the model needs from a transcript's forced alignment: "phones", "words" or None (see
+        `forced_alignment_of`); from the loaded bundle, else from the bundle file's header without torch."""
+        if self._bundle is not None:
+            cfg = self._bundle.config
+            return "phones" if cfg.n_phones else "words" if cfg.uses_text else None
+        return forced_alignment_of(self._model_path)
+
+    # --------------------------------------------------------------------------------- alignment ahead
+
+    def align_ahead(self, audio, *, text: str | None, alignment=None, no_text: bool = False) -> None:
+        """Start the forced alignment of `text` to the audio file `audio` in a process of its own, when the clip
+        will be force-aligned and the model is not loaded yet (torch not imported: align_ahead.py); `prepare`
+        of the same clip takes its answer. Does nothing where that gains nothing."""
+        if self._ahead is not None or self._bundle is not None:
+            return
+        if not force_aligned(text, alignment, no_text) or not Path(audio).is_file():
+            return
+        needs = self.word_alignment()
+        if needs is None:
+            return
+        from facegen import align_ahead
+
+        started = align_ahead.start(audio, text, with_phones=needs == "phones")
+        if started is not None:
+            self._ahead = ((str(audio), text), started)
+
+    def _take_ahead(self, audio, text: str | None) -> AlignAhead | None:
+        if self._ahead is None or self._ahead[0] != (str(audio), text):
+            return None
+        return self._ahead[1]
+
+    def close(self) -> None:
+        """Stop an alignment started ahead that no clip took (nothing else holds resources)."""
+        if self._ahead is not None:
+            self._ahead[1].close()
+            self._ahead = None
+
+    # ---------------------------------------------------------------------------------------- clips
+
+    def prepare(self, audio: str | os.PathLike, *, text: str | None = None,
+                alignment: str | os.PathLike | None = None, no_text: bool = False,
+                speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
+                progress: Say = silent, warn: Say = silent, aligned: Aligned | None = None,
+                meanwhile: Callable[[], object] | None = None) -> Clip:
+        """Everything before the network (see `animate`): audio, word timings, text and audio features.
+        `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
+        While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
+        words, not their times) and `meanwhile` is called (e.g. to import the writer's libraries)."""
+        ahead = self._take_ahead(audio, text) or aligned
+        try:
+            return self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
+                                 template=template, progress=progress, warn=warn, ahead=ahead,
+                                 meanwhile=meanwhile)
+        finally:
+            if ahead is not None and ahead is not aligned:
+                self.close()
+
+    def _prepare(self, audio, *, text, alignment, no_text, speaker, template, progress, warn, ahead,
+                 meanwhile) -> Clip:
+        bundle = self.bundle
+        spk = bundle.speaker_index(speaker)
+        mesh = self.mesh(template)
+        with PROFILE.stage("audio"):
+            samples, sr = load_audio(audio)
+        cfg = bundle.features
+        check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
+        T = num_frames(len(samples) / sr, cfg.fps)
+        if len(samples) / sr < LONG_INPUT_SECONDS:
+            progress = silent
+        with PROFILE.stage("audio_features"):  # before the words: done while an alignment started ahead runs
+            mel = mel_features(samples, sr, cfg, bundle.mel_filters)
+
+        words: list = []
+        source = NONE
+        text_feats = phone_feats = None
+        uses_text = bundle.config.uses_text and not no_text
+        early: tuple[list[str], np.ndarray] | None = None  # the transcript's words and their vectors
+        if ahead is not None and not ahead.ready():  # work that needs no word times, while they are found
+            if meanwhile is not None:
+                with PROFILE.stage("while_aligning"):
+                    meanwhile()
+            if uses_text:
+                from facegen.words import normalize_transcript
+
+                backend = self.text_backend()
+                with PROFILE.stage("text_features"):
+                    names = [word for word, _ in normalize_transcript(text)]
+                    early = names, backend.word_vectors(names)
+        if bundle.config.n_phones:
+            with PROFILE.stage("alignment"):
+                words, source, phone_feats = clip_words_and_phones(
+                    samples, sr, T, cfg.fps, text=text, alignment=alignment, no_text=no_text, warn=warn,
+                    ahead=ahead)
+        if uses_text:
+            if not bundle.config.n_phones:
+                with PROFILE.stage("alignment"):
+                    words, source = clip_words(samples, sr, text=text, alignment=alignment, progress=progress,
+                                               warn=warn, ahead=ahead)
+            from facegen.text import frame_features, text_features
+
+            progress(f"text features ({bundle.text_backend}) for {len(words)} words")
+            if early is not None and early[0] == [w.text for w in words]:
+                text_feats = frame_features(words, early[1], T, cfg)
+            else:
+                backend = self.text_backend()
+                with PROFILE.stage("text_features"):
+                    text_feats = text_features(words, backend, T, cfg)
+
+        progress(f"inference for {T} frames")
+        return Clip(mel, text_feats, spk, phone_feats, audio_name=Path(audio).name, samples=samples,
+                    sample_rate=sr, words=words, word_timing=source, mesh=mesh)
+
+    # ---------------------------------------------------------------------------------------- the network
+
+    def states(self, inputs: Sequence[NetworkInput]) -> list:
+        """The decoder states of each input ([T_i, H] tensors): encoders per clip, the decoder BiLSTMs over
+        one packed batch (each clip sees exactly its own frames, as alone)."""
+        from facegen.inference import batch_decoder_states
+
+        return batch_decoder_states(self.bundle, [(c.mel, c.text_features, c.speaker, c.phones) for c in inputs],
+                                    device=self.device)
+
+    def frames(self, inputs: Sequence[NetworkInput], templates: Sequence[np.ndarray | None]) -> list:
+        """Each input's frames, template + offsets (offsets alone where its template is None), as FrameStreams:
+        the decoder states computed now, the output layer as a writer reads the frames (inference.py)."""
+        from facegen.inference import frame_stream
+
+        return [frame_stream(self.bundle, st, t) for st, t in zip(self.states(inputs), templates, strict=True)]
+
+    def offsets(self, item: NetworkInput) -> np.ndarray:
+        """The vertex offsets [T, V, 3] float32 of one input (evaluation against ground truth)."""
+        return np.asarray(self.frames([item], [None])[0])
+
+    def encoders(self, item: NetworkInput) -> dict[str, np.ndarray]:
+        """The encoders' outputs of one input ("audio" Ha [T, 128] and/or "text" Hl [T, 64]) as float32 arrays
+        (the correlation analysis of plots.py)."""
+        import torch
+
+        model, dev = self.bundle.model, self.device
+        with torch.inference_mode():
+            mel = torch.from_numpy(item.mel)[None].to(dev)
+            text = None if item.text_features is None else torch.from_numpy(item.text_features)[None].to(dev)
+            phones = None if item.phones is None else torch.from_numpy(item.phones)[None].to(dev)
+            enc = model.encode(mel, text, model.speaker_one_hot(item.speaker).to(dev), phones)
+            return {k: v[0].float().cpu().numpy() for k, v in enc.items()}
+
+    def run(self, clips: Sequence[Clip], *, batch_size: int = BATCH_SIZE) -> list[Animation]:
+        """The Animations of prepared clips, in order; the decoder BiLSTMs run `batch_size` clips at a time,
+        sorted by length (each clip's result equals its own single run); the frames are FrameStreams."""
+        out: list[Animation | None] = [None] * len(clips)
+        order = sorted(range(len(clips)), key=lambda i: clips[i].num_frames)
+        for b in range(0, len(order), batch_size):
+            ids = order[b:b + batch_size]
+            batch = [clips[i] for i in ids]
+            for i, frames in zip(ids, self.frames(batch, [c.mesh.vertices for c in batch]), strict=True):
+                out[i] = self.animation(clips[i], frames)
+        return out
+
+    def animation(self, clip: Clip, vertices) -> Animation:
+        """The Animation of a prepared clip with its computed frames (an array or a FrameStream)."""
+        bundle = self.bundle
+        return Animation(
+            vertices=vertices,
+            faces=clip.mesh.faces,
+            fps=bundle.features.fps,
+            template=clip.mesh.vertices,
+            audio=clip.samples,
+            sample_rate=clip.sample_rate,
+            regions=dict(clip.mesh.regions),
+            metadata={
+                "source_audio": clip.audio_name,
+                "model": bundle.path.name if bundle.path else "in-memory",
+                "model_fingerprint": bundle.fingerprint,
+                "speaker": bundle.speakers[clip.speaker],
+                "words": [{"word": w.text, "start": round(w.start, 4), "end": round(w.end, 4)}
+                          for w in clip.words],
+                "word_timing": clip.word_timing,
+            },
+        )
+
+    # ---------------------------------------------------------------------------------------- one call
+
+    def animate(self, audio: str | os.PathLike, *, text: str | None = None,
+                alignment: str | os.PathLike | None = None, no_text: bool = False,
+                speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
+                stream: bool = False, progress: Say = silent, warn: Say = silent,
+                meanwhile: Callable[[], object] | None = None) -> Animation:
+        """Animate the face for one speech clip (see `facegen.animate`)."""
+        PROFILE.mark("animate_start")
+        self.align_ahead(audio, text=text, alignment=alignment, no_text=no_text)
+        try:
+            self.device  # noqa: B018 - an unusable explicit device fails before any work
+            clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
+                                template=template, progress=progress, warn=warn, meanwhile=meanwhile)
+        finally:
+            self.close()
+        with PROFILE.stage("inference"):
+            [anim] = self.run([clip])
+            if not stream:
+                anim.vertices = np.asarray(anim.vertices)
+        PROFILE.mark("animate_end")
+        return anim
+
+
+def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str | os.PathLike | None = None,
+            no_text: bool = False, speaker: str | int | None = None, bundle=None,
+            template: str | os.PathLike | Mesh | None = None, text_model: str | None = None,
+            device: str = "auto", stream: bool = False, progress: Say = silent, warn: Say = silent,
+            meanwhile: Callable[[], object] | None = None) -> Animation:
+    """Animate the face for one speech clip.
+
+    Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
+    recognition; `no_text=True` feeds zero text features instead. `bundle` is a loaded Bundle or a path
+    (None: the built-in default model). `device` is "auto" (a CUDA GPU when torch sees one, else the
+    CPU), "cpu" or "cuda" (a FacegenError without a GPU).
+    With `stream=True` the Animation's vertices are a FrameStream, computed block by block as a writer
+    reads them (bounded memory for long clips); otherwise a [T, V, 3] float32 array.
+    `progress` receives stage messages for long clips (>= 20 s), `warn` receives notes the user should
+    always see. If the forced alignment started ahead (see Animator) still runs once the model is loaded,
+    `meanwhile` is called (e.g. to import the writer's libraries).
+    """
+    return Animator(bundle, text_model=text_model, device=device).animate(
+        audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template,
+        stream=stream, progress=progress, warn=warn, meanwhile=meanwhile)
+
+
+def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
+    """What the model bundle at `model` (None: the built-in one) needs from a transcript's forced alignment:
+    "phones" (words and phones), "words", or None (an audio-only model, or a header that cannot be read:
+    load_bundle will say what is wrong). Read from the header only, without torch."""
+    from facegen.bundle import default_bundle_path, read_metadata
+    from facegen.model_config import ModelConfig
+
+    try:
+        config = ModelConfig.from_dict(read_metadata(model if model is not None else default_bundle_path())
+                                       ["model_config"])
+    except (FacegenError, KeyError, TypeError, ValueError):
+        return None
+    return "phones" if config.n_phones else "words" if config.uses_text else None

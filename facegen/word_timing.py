@@ -1,0 +1,100 @@
+"""A clip's words (and phones) in time, from whichever source the user gave: an alignment file, the forced
+alignment of a transcript, or speech recognition without one.
+
+The Animator (animator.py) asks here for the words of every clip it prepares, and `facegen align` for the
+words it prints. The forced alignment itself is align.py's; what may have been started ahead in a process of
+its own is align_ahead.py's (`ahead`: its `AlignAhead` or `Aligned`).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from facegen.align_ahead import AlignAhead, Aligned
+from facegen.errors import FacegenError
+from facegen.runtime import Say, silent
+
+FORCED, FILE, RECOGNISED, NONE = "forced alignment", "alignment file", "speech recognition", "none (--no-text)"
+
+
+def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
+    """Whether a clip's words come from forced alignment of `text` (not an alignment file, not recognition)."""
+    return text is not None and bool(text.strip()) and alignment is None and not no_text
+
+
+def _check_transcript(text: str) -> None:
+    if not text.strip():
+        raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
+
+
+def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
+               alignment: str | os.PathLike | None = None, progress: Say = silent, warn: Say = silent,
+               ahead: AlignAhead | Aligned | None = None) -> tuple[list, str]:
+    """Word timings for the clip and where they came from (alignment file, forced alignment, recognition);
+    `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py)."""
+    from facegen import align
+    from facegen.alignment_files import read_alignment
+
+    if alignment is not None:
+        return read_alignment(alignment, duration=len(samples) / sr), FILE
+    if text is not None:
+        _check_transcript(text)
+        progress("aligning the transcript to the speech (pocketsphinx)")
+        return forced(samples, sr, text, ahead, with_phones=False)[0], FORCED
+    warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a transcript; "
+         "pass --text, --text-file or --alignment for better upper-face motion)")
+    return align.recognize(samples, sr), RECOGNISED
+
+
+def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None,
+           with_phones: bool) -> tuple[list, list | None]:
+    """Forced alignment of `text` (words, and phones if `with_phones`): the answer of the process started
+    ahead, else aligned here (also when that process gave no answer)."""
+    from facegen import align
+
+    found = ahead.result() if ahead is not None else None
+    if found is not None:
+        return found
+    if with_phones:
+        return align.align_phones(samples, sr, text)
+    return align.align(samples, sr, text), None
+
+
+def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
+                          alignment, no_text: bool, warn: Say,
+                          ahead: AlignAhead | Aligned | None = None) -> tuple[list, str, np.ndarray]:
+    """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
+    transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
+    --no-text, which only drops the text features) the phone alignment of the recognised words."""
+    from facegen.phonetics import phone_frames, silence
+    from facegen.alignment_files import read_alignment, read_phones
+
+    if alignment is not None:
+        words = read_alignment(alignment, duration=len(samples) / sr)
+        phones = read_phones(alignment)
+        if phones is None:
+            raise FacegenError(f"this model needs phone timings but {alignment} has none: write it with "
+                               "`facegen align --phones`, or pass --text")
+        return words, FILE, phone_frames(phones, num_frames, fps)
+    if text is not None and not no_text:
+        _check_transcript(text)
+        words, phones = forced(samples, sr, text, ahead, with_phones=True)
+        return words, FORCED, phone_frames(phones, num_frames, fps)
+    from facegen import align
+
+    # no transcript: the recogniser's words, force-aligned again for their phones
+    recognised = align.recognize(samples, sr)
+    try:
+        words, phones = align.align_phones(samples, sr, " ".join(w.text for w in recognised))
+        found = phone_frames(phones, num_frames, fps)
+    except FacegenError:
+        words, found = recognised, silence(num_frames)
+        warn("no phones could be found in the audio without a transcript: the lips follow the audio alone "
+             "(pass --text for better lip sync)")
+    if not no_text:
+        warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
+             "transcript; pass --text, --text-file or --alignment for better lips and upper face)")
+        return words, RECOGNISED, found
+    return [], NONE, found
