@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 
 from facegen.errors import FacegenError
-from facegen.runtime import PROFILE, cores
+from facegen.runtime import PROFILE, cores, start_process
 
 
 @dataclass
@@ -109,16 +109,13 @@ class AlignAhead:
 def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead | None:
     """Fork a process aligning `text` to the audio file `audio` (with its phones if `with_phones`), or None
     where that is not worth it or not safe (see the module docstring)."""
-    import multiprocessing
+    from multiprocessing import Pipe
 
-    if ("torch" in sys.modules or threading.active_count() > 1 or not text.strip()
-            or "fork" not in multiprocessing.get_all_start_methods() or cores() < 2):
+    if "torch" in sys.modules or threading.active_count() > 1 or not text.strip() or cores() < 2:
         return None
-    context = multiprocessing.get_context("fork")
-    receiver, sender = context.Pipe(duplex=False)
-    process = context.Process(target=_child, args=(sender, str(audio), text, with_phones), daemon=True,
-                              name="facegen-align")
-    process.start()
+    receiver, sender = Pipe(duplex=False)
+    process = start_process(_child, (sender, str(audio), text, with_phones), start="fork",
+                            name="facegen-align")
     sender.close()
     return AlignAhead(process, receiver)
 

@@ -1,15 +1,20 @@
 """Write outputs atomically: a temporary file in the target folder, renamed on success.
 
 Temporary names carry a mark no user file has — `.<stem>.facegen-tmp-<host>-<pid>-<random><suffix>` — so that
-a run writing into a folder can remove what a killed run (SIGKILL, power loss) left there: files with our mark,
-this host's id and the pid of a process that no longer exists (`remove_stale_temporaries`). Other hosts'
+a run writing into a folder can remove what a killed run (SIGKILL, power loss) left there: files with our
+mark, this host's id and the pid of a process that no longer exists (`remove_stale_temporaries`). Other hosts'
 temporaries on a shared folder are left alone. A failure while writing removes the temporary file; a full disk
 is reported as one line (`no space left ...`), whatever the library that was writing said.
+
+An output of several files (an asset, its sidecar WAV, its clip folder, a preview video) is one `Transaction`:
+all its files are renamed into place together at the end, or all removed on an error. `atomic_path` is a
+transaction of one file, and joins the transaction open around it.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import hashlib
 import os
@@ -18,7 +23,9 @@ import shutil
 import socket
 import tempfile
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Self
 
 from facegen.errors import FacegenError
 
@@ -33,18 +40,19 @@ LOW_SPACE = 1 << 20  # bytes: a folder with less free space than this is taken a
 def check_writable(target: str | os.PathLike) -> None:
     """Fail early, before any work, when `target` cannot be written."""
     target = Path(target)
-    folder = target.parent if str(target.parent) else Path(".")
+    folder = _folder(target)
     if not folder.is_dir():
         raise FacegenError(f"output folder {folder} does not exist: create it or choose another -o path")
     if not os.access(folder, os.W_OK):
         raise FacegenError(f"output folder {folder} is not writable: choose another -o path")
     limit = _name_max(folder)
-    if len(os.fsencode(target.name)) > limit:
-        raise FacegenError(f"output name {target.name[:40]}... is {len(os.fsencode(target.name))} bytes long; this "
-                           f"file system allows {limit}: choose a shorter -o name")
+    size = len(os.fsencode(target.name))
+    if size > limit:
+        raise FacegenError(f"output name {target.name[:40]}... is {size} bytes long; this file system allows "
+                           f"{limit}: choose a shorter -o name")
     if target.is_dir():
-        raise FacegenError(f"{target} is a folder, so facegen cannot write that file there: rename or remove the "
-                           "folder, or choose another -o name")
+        raise FacegenError(f"{target} is a folder, so facegen cannot write that file there: rename or remove "
+                           "the folder, or choose another -o name")
 
 
 def _umask() -> int:
@@ -103,10 +111,11 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
     return removed
 
 
-def disk_full_error(target: str | os.PathLike, exc: BaseException | None, need_bytes: int = 0) -> FacegenError | None:
+def disk_full_error(target: str | os.PathLike, exc: BaseException | None,
+                    need_bytes: int = 0) -> FacegenError | None:
     """The one-line error for a write of `target` that failed with `exc` because its disk is full (an OSError
-    with ENOSPC/EDQUOT, or any error while less than LOW_SPACE bytes are free), else None; `need_bytes` is what
-    the write had reached when it failed (a lower bound of what it needs)."""
+    with ENOSPC/EDQUOT, or any error while less than LOW_SPACE bytes are free), else None; `need_bytes` is
+    what the write had reached when it failed (a lower bound of what it needs)."""
     target = Path(target)
     folder = target.parent if str(target.parent) else Path(".")
     full = isinstance(exc, OSError) and exc.errno in FULL_ERRNOS
@@ -131,33 +140,189 @@ def _device(folder: Path) -> str:
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield an unused temporary path beside `target` (same suffix); rename it to `target` on success.
 
-    On any exception (or Ctrl-C, SIGTERM, SIGHUP: see facegen.cli) the temporary file is removed, so no partial
-    output remains; a full disk becomes one FacegenError.
+    On any exception (or Ctrl-C, SIGTERM, SIGHUP: see facegen.cli) the temporary file is removed, so no
+    partial output remains; a full disk becomes one FacegenError. Inside a Transaction the rename waits for
+    its commit.
     """
-    target = Path(target)
-    check_writable(target)
-    folder = target.parent if str(target.parent) else Path(".")
-    remove_stale_temporaries(folder)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=target.suffix, dir=folder)
-    except OSError as exc:
-        full = disk_full_error(target, exc)
-        if full is not None:
-            raise full from exc
-        raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
-    os.close(fd)
-    tmp_path = Path(tmp)
-    tmp_path.unlink()  # writers (pxr, soundfile, ...) create the file themselves
-    try:
-        yield tmp_path
-        if tmp_path.is_file():  # some writers (safetensors) create 0600 files: follow the umask like the rest
-            os.chmod(tmp_path, 0o666 & ~_umask())
-        os.replace(tmp_path, target)
-    except BaseException as exc:
-        written = tmp_path.stat().st_size if tmp_path.is_file() else 0
-        tmp_path.unlink(missing_ok=True)
-        if not isinstance(exc, FacegenError):
-            full = disk_full_error(target, exc, written)
+    with Transaction() as transaction:
+        yield transaction.file(target)
+
+
+_current: contextvars.ContextVar[Transaction | None] = contextvars.ContextVar("transaction", default=None)
+
+
+@dataclass
+class _Staged:
+    """One output of a transaction: `temp` becomes `target` at the commit (kind "file" or "folder"), or a
+    scratch folder removed at the end (kind "scratch"), or an outdated `target` removed at the commit (kind
+    "remove")."""
+    kind: str
+    target: Path
+    temp: Path | None = None
+
+
+class Transaction:
+    """All or nothing for an output of one or more files and folders (an asset, its sidecar WAV, its clip
+    folder, its preview video): each is written to a marked temporary beside its target (`file`, `folder`),
+    and all are renamed into place when the outermost transaction ends without an error, or all removed when
+    it fails.
+
+    A Transaction opened while another is open in this thread joins it (its files are renamed at the outer
+    commit; a failure inside it removes its own temporaries, as a savepoint); `join=False` starts an
+    independent one (e.g. the files of a package written in a scratch folder, which must be in place before
+    they are packed). Every temporary carries the mark of `remove_stale_temporaries`, so a killed run's
+    leftovers are cleaned.
+    """
+
+    def __init__(self, *, join: bool = True) -> None:
+        self._join = join
+        self._root: Transaction = self
+        self._staged: list[_Staged] = []
+        self._start = 0
+        self._token: contextvars.Token | None = None
+
+    def __enter__(self) -> Self:
+        outer = _current.get()
+        if self._join and outer is not None:
+            self._root = outer
+            self._start = len(outer._staged)
+        else:
+            self._token = _current.set(self)
+        return self
+
+    def file(self, target: str | os.PathLike) -> Path:
+        """An unused temporary path beside `target` (same suffix, not created: writers make the file) that
+        becomes `target` at the commit."""
+        target = Path(target)
+        check_writable(target)
+        folder = _folder(target)
+        remove_stale_temporaries(folder)
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=target.suffix, dir=folder)
+        except OSError as exc:
+            full = disk_full_error(target, exc)
             if full is not None:
                 raise full from exc
-        raise
+            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
+        os.close(fd)
+        temp = Path(tmp)
+        temp.unlink()  # writers (pxr, soundfile, ...) create the file themselves
+        self._root._staged.append(_Staged("file", target, temp))
+        return temp
+
+    def folder(self, target: str | os.PathLike) -> Path:
+        """A new temporary folder beside `target` that replaces it (an older folder of that name is removed)
+        at the commit."""
+        target = Path(target)
+        if target.exists() and not target.is_dir():
+            raise FacegenError(f"{target} is a file, so facegen cannot write the folder there: rename or "
+                               "remove it, or choose another -o name")
+        check_writable(_folder(target) / f"{target.name}.new")  # a writable parent, a name not too long
+        temp = self._mkdtemp(target)
+        self._root._staged.append(_Staged("folder", target, temp))
+        return temp
+
+    def scratch(self, near: str | os.PathLike) -> Path:
+        """A new temporary folder beside `near` for intermediate files, removed when this transaction ends."""
+        temp = self._mkdtemp(Path(near))
+        self._root._staged.append(_Staged("scratch", Path(near), temp))
+        return temp
+
+    def remove(self, path: str | os.PathLike) -> None:
+        """Remove `path` (an outdated file or folder of the asset) at the commit, not before."""
+        self._root._staged.append(_Staged("remove", Path(path)))
+
+    def _mkdtemp(self, target: Path) -> Path:
+        folder = _folder(target)
+        try:
+            return Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=folder))
+        except OSError as exc:
+            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
+
+    def __exit__(self, kind, exc, traceback) -> None:
+        if self._token is not None:
+            _current.reset(self._token)
+        mine = self._root._staged[self._start :]
+        if exc is None:
+            if self._root is not self:
+                self._remove_scratch(mine)  # scratch folders serve only the block that made them
+                return
+            try:
+                self._commit(mine)
+            except BaseException as failure:
+                self._fail(mine, failure)
+                raise
+            return
+        self._fail(mine, exc)
+
+    def _remove_scratch(self, mine: list[_Staged]) -> None:
+        for staged in mine:
+            if staged.kind == "scratch":
+                shutil.rmtree(staged.temp, ignore_errors=True)
+        self._root._staged[self._start :] = [s for s in mine if s.kind != "scratch"]
+
+    def _commit(self, staged: list[_Staged]) -> None:
+        """Rename every temporary into place, the last staged first (a sidecar before its asset), then remove
+        the outdated paths; a failed rename takes back what was already placed."""
+        self._remove_scratch(staged)
+        mask = _umask()
+        placed: list[_Staged] = []
+        trash = []
+        try:
+            for entry in reversed(staged):
+                if entry.kind == "file":
+                    if entry.temp.is_file():  # some writers (safetensors) make 0600 files: follow the umask
+                        os.chmod(entry.temp, 0o666 & ~mask)
+                    os.replace(entry.temp, entry.target)
+                elif entry.kind == "folder":
+                    os.chmod(entry.temp, 0o777 & ~mask)
+                    if entry.target.exists():
+                        trash.append(self._mkdtemp(entry.target))
+                        os.replace(entry.target, trash[-1] / entry.target.name)
+                    os.replace(entry.temp, entry.target)
+                placed.append(entry)
+            for entry in staged:
+                if entry.kind == "remove":
+                    _delete(entry.target)
+        except BaseException:
+            for entry in placed:
+                _delete(entry.target)
+            raise
+        finally:
+            for folder in trash:
+                shutil.rmtree(folder, ignore_errors=True)
+            del self._staged[:]
+
+    def _fail(self, mine: list[_Staged], exc: BaseException) -> None:
+        """Remove this block's temporaries; a full disk becomes one FacegenError naming the first target."""
+        written = sum(_size(s.temp) for s in mine if s.temp is not None)
+        for entry in mine:
+            if entry.temp is not None:
+                _delete(entry.temp)
+        del self._root._staged[self._start :]
+        if mine and not isinstance(exc, FacegenError):
+            full = disk_full_error(mine[0].target, exc, written)
+            if full is not None:
+                raise full from exc
+
+
+def _folder(target: Path) -> Path:
+    return target.parent if str(target.parent) else Path(".")
+
+
+def _delete(path: Path) -> None:
+    """Remove a file or a folder tree, if it is there."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _size(path: Path) -> int:
+    """The bytes in a file, or in a folder's files."""
+    with contextlib.suppress(OSError):
+        if path.is_file():
+            return path.stat().st_size
+        if path.is_dir():
+            return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+    return 0

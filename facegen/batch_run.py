@@ -19,7 +19,7 @@ from facegen.batch_plan import RunState, check_plan, file_hash, item_key
 from facegen.batch_report import summary_line, write_reports
 from facegen.engines import ENGINES, check_ray, run_local, run_ray
 from facegen.errors import FacegenError
-from facegen.exchange import format_of
+from facegen.exchange import format_of, format_of_extension
 from facegen.runtime import cores
 
 SAVE_EVERY = 5.0  # seconds between saves of the run state while items finish
@@ -45,11 +45,13 @@ def parse_formats(value: str | Sequence[str] | None) -> list[str] | None:
     names = value.split(",") if isinstance(value, str) else list(value)
     exts = ["." + n.strip().lower().lstrip(".") for n in names if n.strip()]
     if not exts:
-        raise FacegenError("--formats is empty: give extensions such as usdc,glb,json")
+        raise FacegenError("the list of formats is empty: give extensions such as usdc,glb,json",
+                           param="formats")
     for ext in exts:
-        format_of(f"x{ext}")
+        format_of_extension(ext)
     if len(set(exts)) < len(exts):
-        raise FacegenError(f"--formats {','.join(names)} names a format twice: give each once")
+        raise FacegenError(f"the formats {','.join(names)} name a format twice: give each once",
+                           param="formats")
     return exts
 
 
@@ -70,13 +72,13 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     """
     started = time.time()
     if jobs is not None and jobs < 1:
-        raise FacegenError(f"--jobs {jobs} must be at least 1")
+        raise FacegenError(f"the number of jobs must be at least 1, got {jobs}", param="jobs")
     if engine not in ENGINES:
         raise FacegenError(f"unknown engine {engine!r}: use {' or '.join(ENGINES)}")
     if ray_address is not None and engine != "ray":
-        raise FacegenError("--ray-address needs --engine ray")
+        raise FacegenError("a Ray address applies to the ray engine only", param=("ray_address", "engine"))
     exts = parse_formats(formats)
-    format_of(f"x{default_ext}")
+    format_of_extension(default_ext)
     out = Path(os.path.abspath(out_dir))
     all_jobs = read_manifest(manifest, outdir=out, default_ext=default_ext, formats=exts)
     for job in all_jobs:  # workers may run anywhere (Ray): absolute inputs
@@ -155,8 +157,8 @@ def _model_hash(model: Path | None) -> str:
     try:
         return file_hash(path)
     except OSError as exc:
-        raise FacegenError(f"cannot read the model bundle {path} ({exc.strerror}): pass --model PATH to a "
-                           ".safetensors bundle") from exc
+        raise FacegenError(f"cannot read the model bundle {path} ({exc.strerror}): pass the path of a "
+                           ".safetensors bundle", param="model") from exc
 
 
 def _check_rig(jobs: list[Job], model: Path | None) -> None:

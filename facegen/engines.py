@@ -10,26 +10,24 @@ mounted at the same path on every node). Ray is an optional extra: `pip install 
 
 from __future__ import annotations
 
-import os
 import socket
-import sys
 import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 
 from facegen.align_ahead import align_file
 from facegen.batch import Job, JobResult, run_batch
 from facegen.errors import FacegenError
 from facegen.exchange.formats import USD_LIBRARIES
-from facegen.runtime import cores
+from facegen.runtime import ProcessPool, cores, process_pool, set_threads
 
 ENGINES = ("local", "ray")
 # What the local engine's worker processes import before they are forked (once, not in every worker): torch,
-# USD, pocketsphinx and the aligner's decoders (align_warm), the text model's code and the pipeline around them.
+# USD, pocketsphinx and the aligner's decoders (worker_preload), the text model's code and the pipeline around them.
 # Nothing here may start threads (torch and USD start theirs on first use, not on import).
 PRELOAD = ["torch", *USD_LIBRARIES, "pocketsphinx",
-           "safetensors.torch", "tokenizers", "facegen.engines", "facegen.pipeline", "facegen.align_warm",
+           "safetensors.torch", "tokenizers", "facegen.engines", "facegen.animator", "facegen.worker_preload",
            "facegen.minilm", "facegen.text", "facegen.exchange.usd", "facegen.validate"]
 OnResult = Callable[[JobResult], None]
 
@@ -55,16 +53,13 @@ class Worker:
 
 def limit_threads(threads: int) -> None:
     """At most `threads` threads in each pool this process computes with: torch's, the BLAS and OpenMP pools
-    (threadpoolctl) and USD's (pxr.Work). With a worker per core, a second thread only spins: 20 clips in one
-    process took the same wall time with one thread per pool and 21 % less CPU (14.0 -> 11.0 s), which the other worker gets."""
-    import torch
-    from pxr import Work
-    from threadpoolctl import threadpool_limits
+    and USD's (runtime.set_threads). With a worker per core, a second thread only spins: 20 clips in one
+    process took the same wall time with one thread per pool and 21 % less CPU (14.0 -> 11.0 s), which the
+    other worker gets."""
+    import torch  # noqa: F401 - imported now, so that its pool is limited too
+    from pxr import Work  # noqa: F401 - likewise
 
-    threads = max(1, threads)
-    torch.set_num_threads(threads)
-    threadpool_limits(threads)
-    Work.SetConcurrencyLimit(threads)
+    set_threads(threads)
 
 
 _worker: Worker | None = None  # the local engine's worker of this process (set by the pool's initializer)
@@ -75,7 +70,7 @@ def _init_local(model: str | None, device: str, text_model: str | None, threads:
 
     global _worker
     _worker = Worker(model, device, text_model, threads)
-    signal.signal(signal.SIGTERM, _exit)  # from _stop_workers: unwind the atomic writes, exit without a traceback
+    signal.signal(signal.SIGTERM, _exit)  # from ProcessPool.stop: unwind the atomic writes, no traceback
 
 
 def _exit(signum: int, _frame) -> None:
@@ -110,13 +105,8 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
             for result in worker.run(chunk, batch_size):
                 on_result(result)
         return
-    import multiprocessing
-
-    context = multiprocessing.get_context("forkserver" if sys.platform.startswith("linux") else "spawn")
-    if context.get_start_method() == "forkserver":
-        context.set_forkserver_preload(PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_local,
-                               initargs=(model, device, text_model, threads))
+    pool = process_pool(workers, start="forkserver", preload=PRELOAD, initializer=_init_local,
+                        initargs=(model, device, text_model, threads))
     queue = chunks(jobs, workers, batch_size)
     to_align = _alignable(queue, model)
     pending: dict = {}
@@ -149,34 +139,13 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
                     on_result(result)
     except BaseException:  # Ctrl-C, SIGTERM, an error in on_result: stop the workers now, not after their chunks
         starter.join()  # its workers too
-        _stop_workers(pool)
+        pool.stop()
         raise
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        if context.get_start_method() == "forkserver":
-            _stop_forkserver()
+        pool.close()
 
 
-def _stop_forkserver() -> None:
-    """End the forkserver once its workers are done. Left alone, it exits when this process does, through the
-    interpreter's teardown of torch and USD (0.5-0.8 s, while whoever reads this process's output pipes waits:
-    a CI log, subprocess.run). Killed instead: it holds nothing, and the next batch of this process starts a new
-    one. Private API of multiprocessing.forkserver (stable from Python 3.8 to 3.13); without it, nothing is done."""
-    import signal
-    from multiprocessing import forkserver
-
-    server = getattr(forkserver, "_forkserver", None)
-    pid = getattr(server, "_forkserver_pid", None)
-    if pid is None or not hasattr(server, "_stop"):
-        return
-    try:
-        os.kill(pid, signal.SIGKILL)
-        server._stop()  # closes its "alive" pipe, reaps it, forgets it
-    except OSError:
-        pass
-
-
-def _submit(pool: ProcessPoolExecutor, chunks_: list[list[Job]], batch_size: int, pending: dict,
+def _submit(pool: ProcessPool, chunks_: list[list[Job]], batch_size: int, pending: dict,
             failed: list[BaseException] | None = None) -> None:
     """Submit each chunk to the pool, into `pending` (future -> chunk); an error goes to `failed` when given."""
     try:
@@ -210,18 +179,6 @@ def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[int, Job
         return []
     return [(i, job, needs == "phones") for i, chunk in enumerate(queue) for job in chunk
             if force_aligned(job.text, job.alignment, job.no_text) and not job.problem]
-
-
-def _stop_workers(pool: ProcessPoolExecutor, grace: float = 5.0) -> None:
-    """Terminate the pool's processes (SIGTERM: each unwinds its atomic writes), killing those that linger.
-    A temporary file a killed worker leaves is removed by the next run (facegen.atomic)."""
-    processes = list((pool._processes or {}).values())  # no public API for this before Python 3.14
-    for process in processes:
-        process.terminate()
-    for process in processes:
-        process.join(grace)
-        if process.is_alive():
-            process.kill()
 
 
 class _RayWorker(Worker):

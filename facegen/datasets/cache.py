@@ -19,6 +19,7 @@ import numpy as np
 from facegen.atomic import atomic_path
 from facegen.audio import FeatureConfig, load_audio, mel_features
 from facegen.errors import FacegenError
+from facegen.runtime import cache_dir
 
 if TYPE_CHECKING:
     from facegen.datasets.biwi import Dataset, Sequence
@@ -48,8 +49,7 @@ def default_cache_dir(root: Path) -> Path:
             return cache
     except OSError:
         pass
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "facegen" / "datasets" / f"{root.name}-{digest(str(root.resolve()))[:8]}"
+    return cache_dir("datasets", f"{root.name}-{digest(str(root.resolve()))[:8]}")
 
 
 class BadSequence(Exception):

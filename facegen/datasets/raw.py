@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import re
 import shutil
-import subprocess
 import tarfile
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -19,8 +18,9 @@ from facegen.atomic import atomic_path
 from facegen.datasets.biwi import REGION_FILES, DatasetWriter
 from facegen.datasets.splits import parse_subjects, sequence_name
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh, read_mesh, read_region, surface_area, unit_area
-from facegen.runtime import Say, progress_bar, silent, warn_stderr
+from facegen.face.mesh import Mesh, read_mesh, read_region, surface_area, unit_area
+from facegen.face.regions import COMMUNITY_FILES
+from facegen.runtime import Say, progress_bar, run_tool, silent, warn_stderr
 
 ROTATE_X_PI = np.array([[1.0, 0.0, 0.0],  # the community's rotx for theta = pi (applied as V @ rotx)
                         [0.0, np.cos(np.pi), -np.sin(np.pi)],
@@ -153,13 +153,9 @@ def _find_videos(raw: Path) -> dict[tuple[str, int], Path]:
 
 
 def _extract_audio(video: Path, wav: Path, sample_rate: int) -> None:
-    import imageio_ffmpeg
-
-    ffmpeg = imageio_ffmpeg.get_ffmpeg_exe()
     with atomic_path(wav) as tmp:
-        cmd = [ffmpeg, "-nostdin", "-v", "error", "-y", "-i", str(video), "-vn", "-ac", "1",
-               "-ar", str(sample_rate), "-acodec", "pcm_s16le", "-f", "wav", str(tmp)]
-        done = subprocess.run(cmd, check=False, capture_output=True, text=True)
+        done = run_tool("ffmpeg", ["-nostdin", "-v", "error", "-y", "-i", video, "-vn", "-ac", "1",
+                                   "-ar", str(sample_rate), "-acodec", "pcm_s16le", "-f", "wav", tmp], text=True)
         if done.returncode != 0 or not tmp.is_file():
             msg = (done.stderr.strip().splitlines() or ["no audio stream"])[-1]
             raise FacegenError(f"ffmpeg could not extract the audio of {video.name} ({msg})")

@@ -23,10 +23,7 @@ from facegen.exchange.formats import COMMON_OPTIONS, FORMATS, Format
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
-    from facegen.mesh import Mesh
-
-OPTION_FLAGS = {"mode": "--usd-mode", "rig": "--rig", "morph_targets": "--morph-targets", "tolerance": "--tolerance",
-                "clips": "--usd-clips"}
+    from facegen.face.mesh import Mesh
 
 
 def extensions() -> list[str]:
@@ -36,14 +33,20 @@ def extensions() -> list[str]:
 
 def format_of(path: str | os.PathLike) -> Format:
     """The table row for `path`'s extension; an unknown extension is a FacegenError."""
-    suffix = Path(path).suffix.lower()
+    return format_of_extension(Path(path).suffix, Path(path).name)
+
+
+def format_of_extension(extension: str, name: str | None = None) -> Format:
+    """The table row for a file extension (".usdc", "usdc", any case); an unknown one is a FacegenError
+    (naming the file `name` when given)."""
+    suffix = "." + extension.lower().lstrip(".") if extension else ""
     for fmt in FORMATS:
         if suffix in fmt.extensions:
             return fmt
-    raise FacegenError(
-        f"cannot handle {Path(path).name!r}: unknown extension {suffix or '(none)'!r}; "
-        f"use one of {', '.join(extensions())}"
-    )
+    what = f"cannot handle {name!r}: " if name is not None else ""
+    known = ", ".join(extensions())
+    raise FacegenError(f"{what}unknown extension {suffix or '(none)'!r}; use one of {known}",
+                       param="path")
 
 
 def format_module(path: str | os.PathLike) -> ModuleType:
@@ -60,30 +63,31 @@ def import_writer(path: str | os.PathLike) -> None:
 
 
 def check_write_options(path: str | os.PathLike, options: dict) -> None:
-    """Refuse options the format of `path` does not take (before any work is done)."""
+    """Refuse options the format of `path` does not take (before any work is done); the error's `param` names
+    them (a front end says how it spells them)."""
     unknown = sorted(set(options) - set(format_of(path).options + COMMON_OPTIONS))
     if unknown:
-        names = ", ".join(OPTION_FLAGS.get(k, k) for k in unknown)
-        raise FacegenError(
-            f"{names} does not apply to {Path(path).suffix} files: drop it or choose another output format"
-        )
+        raise FacegenError(f"{', '.join(unknown)} {'does' if len(unknown) == 1 else 'do'} not apply to "
+                           f"{Path(path).suffix} files: drop it or choose another output format",
+                           param=tuple(unknown) if len(unknown) > 1 else unknown[0])
 
 
 def write_animation(anim: Animation, path: str | os.PathLike, **options) -> list[Path]:
     """Write `anim` in the format of `path`'s extension; return the files written (asset first).
 
-    Options are the format's keyword arguments (e.g. `meters_per_unit` for USD, `write_audio` for all);
-    an option the format does not take is a FacegenError.
+    Options are the format's keyword arguments (e.g. `meters_per_unit` for USD, `write_audio` and
+    `audio_source` for all); an option the format does not take is a FacegenError. The write follows the
+    checked plan of facegen.exchange.plan (`plan_write`), as the CLI and batch do.
     """
-    check_write_options(path, options)
-    return format_module(path).write(anim, path, **options)
+    from facegen.exchange.plan import plan_write
+
+    return plan_write(path, options=options).write(anim)
 
 
 def read_animation(
     path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None
 ) -> Animation:
     """Read an animation file; `template` gives faces/rest pose where the file has none (.npy)."""
-    module = format_module(path)
-    if not hasattr(module, "read"):
+    if not format_of(path).reads:
         raise FacegenError(f"facegen writes {Path(path).suffix} files but cannot read them back")
-    return module.read(path, template=template, fps=fps)
+    return format_module(path).read(path, template=template, fps=fps)

@@ -2,8 +2,9 @@
 
 A row names the format's module (its `write` and, when the format can be read back, `read`), the file
 extensions it owns, the write options it takes besides the common `write_audio` and `audio_source`, whether
-its writer streams (reads `anim.frame_blocks()`, so a FrameStream is never held whole) and the module of
-`facegen.validate` that checks its files. A new format is one new module plus one row here.
+its writer streams (reads `anim.frame_blocks()`, so a FrameStream is never held whole), the module of
+`facegen.validate` that checks its files, and what its files carry (a sidecar WAV, the mesh, the frame rate,
+ARKit weights): code asks the row, never the suffix. A new format is one new module plus one row here.
 
 The rows live in this one small module rather than in each format module so that reading the table (the
 CLI's `--help` lists the extensions) imports neither numpy nor pxr/pygltflib; tests/test_exchange_usd.py
@@ -25,9 +26,13 @@ class Format:
     options: tuple[str, ...]  # write options besides COMMON_OPTIONS
     validator: str
     streams: bool = False  # its writer reads frames block by block
-    whole_clip: tuple[str, str] | None = None  # (option, value) with which the writer needs every frame at once
+    whole_clip: tuple[str, str] | None = None  # (option, value) making the writer need all frames at once
     arkit: bool = False  # its files hold ARKit shape weights (fitted on the rig's face: facegen.arkit)
-    libraries: tuple[str, ...] = ()  # the modules its writer imports that take long to import (exchange.import_writer)
+    libraries: tuple[str, ...] = ()  # modules its writer imports that are slow to import (import_writer)
+    sidecar: bool = True  # its writer puts the audio beside the file as a WAV (out.wav)
+    reads: bool = True  # facegen reads its files back (its module has `read`)
+    holds_mesh: bool = True  # its files hold the faces and rest pose (else a template gives them)
+    holds_fps: bool = True  # its files hold the frame rate (else the caller gives it)
 
     def streams_with(self, options: dict) -> bool:
         """True when writing with `options` reads the frames block by block."""
@@ -41,18 +46,20 @@ USD_LIBRARIES = ("pxr.Usd", "pxr.UsdGeom", "pxr.UsdSkel", "pxr.UsdShade", "pxr.U
 FORMATS = (
     Format("USD", "facegen.exchange.usd", (".usda", ".usdc", ".usd"),
            ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit", "clips"), "facegen.validate.usd",
-           streams=True, whole_clip=("mode", "blendshapes"), libraries=USD_LIBRARIES),  # blendshapes: a PCA over the whole clip
-    Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True),
+           streams=True, whole_clip=("mode", "blendshapes"),  # blendshapes: a PCA over the whole clip
+           libraries=USD_LIBRARIES),
+    Format("NumPy", "facegen.exchange.npy", (".npy",), (), "facegen.validate.npy", streams=True,
+           holds_mesh=False, holds_fps=False),  # [T, 3V] vertex positions only
     Format("glTF", "facegen.exchange.gltf", (".glb", ".gltf"),
            ("rig", "morph_targets", "tolerance", "meters_per_unit"), "facegen.validate.gltf"),
     Format("USDZ", "facegen.exchange.usdz", (".usdz",),
            ("mode", "rig", "morph_targets", "tolerance", "meters_per_unit", "clips"),
-           "facegen.validate.usd", libraries=USD_LIBRARIES),
+           "facegen.validate.usd", libraries=USD_LIBRARIES, sidecar=False),  # the audio is in the package
     # ARKit's 52 shape weights per frame (fitted on facegen's face): Audio2Face JSON, Live Link Face CSV
-    Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit", streams=True,
-           arkit=True),
-    Format("Live Link Face CSV", "facegen.exchange.arkit_csv", (".csv",), (), "facegen.validate.arkit", streams=True,
-           arkit=True),
+    Format("Audio2Face JSON", "facegen.exchange.arkit_json", (".json",), (), "facegen.validate.arkit",
+           streams=True, arkit=True, reads=False, holds_mesh=False),
+    Format("Live Link Face CSV", "facegen.exchange.arkit_csv", (".csv",), (), "facegen.validate.arkit",
+           streams=True, arkit=True, reads=False, holds_mesh=False),
 )
 
 

@@ -53,7 +53,7 @@ from facegen.exchange.formats import by_module
 from facegen.exchange.pca import MorphBasis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
-from facegen.mesh import Mesh, check_topology, vertex_normals
+from facegen.face.mesh import Mesh, check_topology, vertex_normals
 
 FORMAT = by_module(__name__)
 DEFAULT_METERS_PER_UNIT = 0.2
@@ -94,22 +94,15 @@ def write(
     sound = mp3.encode(audio, anim.sample_rate) if audio is not None else None
     bin_path = path.with_suffix(".bin")
     gltf, blob = build(anim, basis, sound, meters_per_unit, wav_name=sidecar_path(path).name if sound else None)
-    bin_placed = False
-    try:
-        with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
-            if suffix == ".glb":
-                gltf.set_binary_blob(blob)
-                gltf.save_binary(str(tmp))
-            else:
-                gltf.buffers[0].uri = bin_path.name
-                tmp.write_text(gltf.to_json(separators=(",", ":")))
-                with atomic_path(bin_path) as tmp_bin:
-                    tmp_bin.write_bytes(blob)
-                bin_placed = True
-    except BaseException:
-        if bin_placed:  # the .bin was renamed into place but the .gltf was not: take it back
-            bin_path.unlink(missing_ok=True)
-        raise
+    with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
+        if suffix == ".glb":
+            gltf.set_binary_blob(blob)
+            gltf.save_binary(str(tmp))
+        else:
+            gltf.buffers[0].uri = bin_path.name
+            tmp.write_text(gltf.to_json(separators=(",", ":")))
+            with atomic_path(bin_path) as tmp_bin:  # joins the transaction: renamed with the .gltf
+                tmp_bin.write_bytes(blob)
     return [path] + ([bin_path] if suffix == ".gltf" else []) + ([wav] if wav is not None else [])
 
 
@@ -443,7 +436,8 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     vertices = reconstruct(decoded)
     file_fps = decoded["fps"]
     if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-3:
-        raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")
+        raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop the frame rate or "
+                           "resample", param="fps")
     rate = float(file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS)
     faces = decoded["faces"]
     if template is not None:

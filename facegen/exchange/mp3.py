@@ -13,12 +13,12 @@ start with silence; the WAV sidecar keeps them).
 from __future__ import annotations
 
 import functools
-import subprocess
 from math import gcd
 
 import numpy as np
 
 from facegen.errors import FacegenError
+from facegen.runtime import run_tool
 
 MP3_RATES = (8000, 11025, 12000, 16000, 22050, 24000, 32000, 44100, 48000)
 
@@ -87,19 +87,13 @@ def measured_delay(sample_rate: int, kbps: int) -> int:
 
 def _lame(samples: np.ndarray, sample_rate: int, kbps: int) -> bytes:
     """Encode with ffmpeg's libmp3lame (the binary that imageio-ffmpeg ships), without a Xing header."""
-    import imageio_ffmpeg
-
-    command = [
-        imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-nostdin",
+    args = [
+        "-hide_banner", "-loglevel", "error", "-nostdin",
         "-f", "f32le", "-ar", str(sample_rate), "-ac", "1", "-i", "pipe:0",
         "-c:a", "libmp3lame", "-b:a", f"{kbps}k", "-write_xing", "0", "-id3v2_version", "0",
         "-f", "mp3", "pipe:1",
     ]
-    try:
-        done = subprocess.run(command, input=np.ascontiguousarray(samples, np.float32).tobytes(),
-                              capture_output=True, check=False, timeout=600)
-    except OSError as exc:
-        raise FacegenError(f"cannot run ffmpeg to encode MP3 ({exc}): reinstall imageio-ffmpeg") from exc
+    done = run_tool("ffmpeg", args, input=np.ascontiguousarray(samples, np.float32).tobytes(), timeout=600)
     if done.returncode != 0 or not done.stdout:
         message = done.stderr.decode(errors="replace").strip().splitlines()
         raise FacegenError(

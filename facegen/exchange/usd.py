@@ -35,7 +35,6 @@ only; lists of one scalar type become typed arrays, other lists JSON strings)}.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
@@ -46,6 +45,7 @@ import numpy as np
 
 from facegen import __version__
 from facegen.animation import DEFAULT_FPS, Animation, check_animation
+from facegen.atomic import Transaction
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_clips, usd_skel
@@ -53,7 +53,7 @@ from facegen.exchange.basis import stored, writer_basis
 from facegen.exchange.formats import by_module
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.wav import atomic_with_sidecar
-from facegen.mesh import Mesh, check_topology
+from facegen.face.mesh import Mesh, check_topology
 
 FORMAT = by_module(__name__)
 MODES = ("points", "blendshapes")
@@ -105,8 +105,11 @@ def write(
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     clip_files: list[Path] = []
     folder = usd_clips.folder_of(path)
-    with (atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav),
-          usd_clips.atomic_folder(folder) if per_clip else contextlib.nullcontext() as work):
+    with (Transaction() as transaction,
+          atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav)):
+        work = transaction.folder(folder) if per_clip else None
+        if not per_clip:
+            usd_clips.remove_stale(path, transaction)
         layer = Sdf.Layer.CreateNew(str(tmp))
         if layer is None:
             raise FacegenError(f"cannot create USD layer {tmp}: check the output folder")
@@ -133,8 +136,6 @@ def write(
         if not layer.Save():
             raise FacegenError(f"cannot write {path}: check free disk space and permissions")
         del layer
-    if not per_clip:
-        usd_clips.remove_stale(path)
     return [path, *([] if wav is None else [wav]), *clip_files]
 
 
@@ -146,13 +147,16 @@ def _check_mode(anim: Animation, mode: str | None, rig: str, morph_targets: int 
     if mode not in MODES:
         raise FacegenError(f"unknown USD mode {mode!r}: use one of {', '.join(MODES)}")
     if mode == "points" and rig == "arkit":
-        raise FacegenError("--rig arkit writes UsdSkel blend shapes: drop --usd-mode points")
+        raise FacegenError("the arkit rig writes UsdSkel blend shapes: drop the points mode",
+                           param=("rig", "mode"))
     if mode == "points":
         given = [n for n, v in (("morph targets", morph_targets), ("tolerance", tolerance)) if v is not None]
         if given:
             raise FacegenError(
                 f"{' and '.join(given)} apply to USD blendshapes only: "
-                "add --usd-mode blendshapes or drop them"
+                "use the blendshapes mode or drop them",
+                param=("mode", *(p for p, v in (("morph_targets", morph_targets), ("tolerance", tolerance))
+                                 if v is not None))
             )
         return None
     return writer_basis(anim, rig, morph_targets, tolerance)
@@ -486,7 +490,8 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
         vertices[i] = frame
     file_fps = stage_fps(stage)
     if fps is not None and file_fps is not None and abs(file_fps - fps) > 1e-6:
-        raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop --fps or resample")
+        raise FacegenError(f"{path} is at {file_fps:g} fps but {fps:g} fps was asked: drop the frame rate or "
+                           "resample", param="fps")
     rate = float(file_fps if file_fps is not None else fps if fps is not None else DEFAULT_FPS)
     if template is not None:
         check_topology(Mesh(vertices[0], faces), template.num_vertices, template.faces, f"{path}")

@@ -19,24 +19,20 @@ and on /Face/Mesh the clip set "default": assetPaths, primPath "/Face/Mesh", act
 k)], times [(0, 0), (T-1, T-1)] (stage time = clip time), manifestAssetPath. usd-core (and all that reads
 USD through it) composes the clips into one animation: `points` has one sample per frame at 0..T-1.
 
-The folder is written as a temporary folder beside the target and renamed into place with the main file;
-a failed write leaves nothing, and rewriting a long clip replaces the whole folder.
+The folder is written as a temporary folder beside the target and renamed into place with the main file (one
+facegen.atomic.Transaction); a failed write leaves nothing, and rewriting a long clip replaces the whole folder.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import shutil
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from facegen.animation import Animation
-from facegen.atomic import check_writable, disk_full_error, temp_prefix
+from facegen.atomic import Transaction
 from facegen.errors import FacegenError
 
 CLIP_THRESHOLD = 3000  # frames (2 min at 25 fps): "auto" writes longer clips as value clips
@@ -65,7 +61,8 @@ def clip_frames(option: str | int, frames: int, points: bool) -> int | None:
     if option == "never" or (option == "auto" and (not points or frames <= CLIP_THRESHOLD)):
         return None
     if not points:
-        raise FacegenError("value clips hold points samples: drop --usd-clips or use --usd-mode points")
+        raise FacegenError("value clips hold points samples: drop the clips or use the points mode",
+                           param=("clips", "mode"))
     return CLIP_FRAMES if option == "auto" else int(option)
 
 
@@ -172,48 +169,9 @@ def _save(layer, path: Path) -> None:
         raise FacegenError(f"cannot write {path}: check free disk space and permissions")
 
 
-@contextlib.contextmanager
-def atomic_folder(target: Path) -> Iterator[Path]:
-    """Yield a new temporary folder beside `target`; on success it replaces `target` (an older folder of the
-    same name is removed), on failure it is removed."""
-    parent = target.parent if str(target.parent) else Path(".")
-    if target.exists() and not target.is_dir():
-        raise FacegenError(f"{target} is a file, so facegen cannot write the clip folder there: rename or remove "
-                           "it, or choose another -o name")
-    check_writable(parent / f"{target.name}.new")  # the folder's parent is writable, the name not too long
-    try:
-        work = Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=parent))
-    except OSError as exc:
-        raise FacegenError(f"cannot write in {parent} ({exc.strerror}): choose another -o path") from exc
-    try:
-        yield work
-        os.chmod(work, 0o777 & ~_umask())
-        old = None
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=parent))
-            os.replace(target, old / target.name)
-        os.replace(work, target)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException as exc:
-        written = sum(f.stat().st_size for f in work.glob("*") if f.is_file()) if work.is_dir() else 0
-        shutil.rmtree(work, ignore_errors=True)
-        if not isinstance(exc, FacegenError):
-            full = disk_full_error(target, exc, written)
-            if full is not None:
-                raise full from exc
-        raise
-
-
-def remove_stale(path: Path) -> None:
-    """After writing `path` as one file: remove the clip folder an earlier long write of `path` left (it is
-    recognised by its manifest), so that no outdated clips stay beside the asset."""
+def remove_stale(path: Path, transaction: Transaction) -> None:
+    """When writing `path` as one file: remove, at the transaction's commit, the clip folder an earlier long
+    write of `path` left (it is recognised by its manifest), so that no outdated clips stay beside the asset."""
     folder = folder_of(path)
     if folder.is_dir() and (folder / f"{path.stem}.manifest.usda").is_file():
-        shutil.rmtree(folder, ignore_errors=True)
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
+        transaction.remove(folder)

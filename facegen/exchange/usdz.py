@@ -9,22 +9,21 @@
                CreateNewUsdzPackage follows from the stage's clip set and sublayer
 
 No sidecar is written beside the package: it is self-contained. The package is made with
-UsdUtils.CreateNewUsdzPackage from a temporary folder and renamed into place, so a failed write leaves
-nothing behind.
+UsdUtils.CreateNewUsdzPackage from a marked scratch folder and renamed into place (one
+facegen.atomic.Transaction), so a failed write leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 from facegen.animation import Animation
-from facegen.atomic import atomic_path
+from facegen.atomic import Transaction
 from facegen.errors import FacegenError
 from facegen.exchange import usd
 from facegen.exchange.formats import by_module
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 
 FORMAT = by_module(__name__)
 
@@ -43,10 +42,11 @@ def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True,
     path = Path(path)
     if path.suffix.lower() not in FORMAT.extensions:
         raise FacegenError(f"{path} is not a USDZ file name: use {', '.join(FORMAT.extensions)}")
-    folder = path.parent if str(path.parent) else Path(".")
-    with atomic_path(path) as tmp, tempfile.TemporaryDirectory(prefix=f".{path.stem}.", dir=folder) as work:
-        stage_file = Path(work) / f"{path.stem}.usdc"
-        usd.write(anim, stage_file, write_audio=write_audio, **usd_options)
+    with Transaction() as transaction:
+        tmp = transaction.file(path)
+        stage_file = transaction.scratch(path) / f"{path.stem}.usdc"  # marked: a killed run's is cleaned
+        with Transaction(join=False):  # the stage's files are in place in the scratch folder before packing
+            usd.write(anim, stage_file, write_audio=write_audio, **usd_options)
         made = UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(stage_file)), str(tmp))
         if not made or not tmp.is_file():
             raise FacegenError(f"cannot write the USDZ package {path}: check free disk space and permissions")

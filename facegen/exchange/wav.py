@@ -1,7 +1,7 @@
 """The audio sidecar: the clip's sound written as a WAV file beside an animation file.
 
 `out.usda` gets `out.wav` (PCM 16-bit, mono, at the animation's sample rate). The main file and its
-sidecar are written together: both through temporary files, so a failed write leaves neither.
+sidecar are written together: one facegen.atomic.Transaction, so a failed write leaves neither.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facegen.atomic import atomic_path
+from facegen.atomic import Transaction
 from facegen.audio import write_wav
 from facegen.errors import FacegenError
 
@@ -40,31 +40,18 @@ def atomic_with_sidecar(
 ) -> Iterator[tuple[Path, Path | None]]:
     """Yield (temporary main path, final sidecar path or None) for writing `target` with its audio.
 
-    The sidecar WAV is written first to its own temporary file; both files are renamed into place
-    only when the caller's block succeeds. On failure neither file is left behind. When `source` (the
-    input audio file) is the sidecar itself (`clip.wav` animated to `clip.usda`), it is kept as it is
-    and referenced instead of being overwritten.
+    The sidecar WAV is written first to its own temporary file; both files are one Transaction, renamed into
+    place only when the caller's block succeeds (and the transaction open around it, if any, commits). On
+    failure neither file is left behind. When `source` (the input audio file) is the sidecar itself
+    (`clip.wav` animated to `clip.usda`), it is kept as it is and referenced instead of being overwritten.
     """
     target = Path(target)
-    if audio is None:
-        with atomic_path(target) as tmp:
-            yield tmp, None
-        return
-    wav = sidecar_path(target)
+    wav = sidecar_path(target) if audio is not None else None
     if wav == target:
         raise FacegenError(f"output {target} would be overwritten by its own audio sidecar: use another name")
-    if is_same_file(source, wav):
-        with atomic_path(target) as tmp:
-            yield tmp, wav
-        return
-    placed = False
-    try:
-        with atomic_path(target) as tmp:
-            with atomic_path(wav) as tmp_wav:
-                write_wav(audio, sample_rate, tmp_wav)
-                yield tmp, wav
-            placed = True  # the sidecar is in place; the main file is renamed next
-    except BaseException:
-        if placed:
-            wav.unlink(missing_ok=True)
-        raise
+    with Transaction() as transaction:
+        tmp = transaction.file(target)
+        if wav is not None and not is_same_file(source, wav):
+            with Transaction() as sidecar:  # a failure names the sidecar
+                write_wav(audio, sample_rate, sidecar.file(wav))
+        yield tmp, wav

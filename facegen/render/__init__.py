@@ -29,7 +29,7 @@ import numpy as np
 from facegen.animation import Animation, check_animation
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh, read_mesh
+from facegen.face.mesh import Mesh, read_mesh
 from facegen.render.overlay import compare_overlay
 from facegen.render.raster import (
     DEFAULT_VIEWS,
@@ -40,7 +40,8 @@ from facegen.render.raster import (
     heat_colors,
     render_image,
 )
-from facegen.render.video import check_output, clip_audio, default_threads, encode, frames_in_order
+from facegen.render.video import check_output, clip_audio, encode, frames_in_order
+from facegen.runtime import cores
 
 __all__ = ["RenderResult", "check_output", "check_views", "render", "render_animation", "render_image",
            "render_still"]
@@ -112,7 +113,7 @@ def render_animation(
         overlay = compare_overlay(renderer.size, len(renderer.views), vmax, anim.size, labels)
     width = renderer.width * (2 if compare is not None else 1)
     height = renderer.size
-    threads = default_threads() if threads is None else max(1, int(threads))
+    threads = cores() if threads is None else max(1, int(threads))
 
     base_colors = face_colors(anim.regions, anim.num_vertices)
 
@@ -178,7 +179,7 @@ def _check_comparable(a: Animation, b: Animation, labels: tuple[str, str], notes
     if abs(a.fps - b.fps) > 1e-6:
         raise FacegenError(
             f"{name_a} is at {a.fps:g} fps but {name_b} at {b.fps:g} fps: compare clips at one "
-            "frame rate (resample one, or pass --fps for .npy files)"
+            "frame rate: resample one, or give the frame rate of a .npy file", param="fps"
         )
     if a.num_frames != b.num_frames:
         shorter, longer = sorted((a.num_frames, b.num_frames))
@@ -198,13 +199,13 @@ def _read_input(
     path: str | os.PathLike, template: Mesh | None = None, fps: float | None = None, what: str = "input"
 ) -> Animation:
     """Read an animation file for rendering, with one-line errors for the usual mistakes."""
-    from facegen.exchange import format_module, read_animation
+    from facegen.exchange import format_of, read_animation
 
     path = Path(path)
-    format_module(path)  # unknown extension → FacegenError naming the ones facegen reads
+    fmt = format_of(path)  # unknown extension → FacegenError naming the ones facegen reads
     if not path.is_file():
         raise FacegenError(f"{what} {path} does not exist: pass an animation file facegen wrote")
-    if path.suffix.lower() == ".npy" and template is None:
+    if not fmt.holds_mesh and fmt.reads and template is None:  # vertex positions only (.npy)
         template = _default_template(path)
     return read_animation(path, template=template, fps=fps)
 
@@ -220,7 +221,7 @@ def _default_template(path: Path) -> Mesh:
     if count != template.num_vertices:
         raise FacegenError(
             f"{path.name} stores only vertex positions, {count} per frame, and the built-in model's face has "
-            f"{template.num_vertices}: pass --model BUNDLE or --template MESH to give its faces"
+            f"{template.num_vertices}: pass the template mesh that gives its faces", param="template"
         )
     return template
 
@@ -258,7 +259,9 @@ def render(
         else:
             compare = Path(compare)
             label_b = f"B: {compare.name}"
-            stores_fps = compare.suffix.lower() != ".npy"
+            from facegen.exchange import format_of
+
+            stores_fps = format_of(compare).holds_fps
             own = mesh if mesh is not None else Mesh(np.asarray(anim.template, np.float32), anim.faces)
             other = _read_input(compare, own, None if stores_fps else anim.fps, what="comparison file")
     return render_animation(

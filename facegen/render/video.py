@@ -1,6 +1,6 @@
 """Video files: rgb24 frames piped to ffmpeg as H.264 MP4 with the clip's audio, frames rendered ahead.
 
-The ffmpeg binary is imageio-ffmpeg's; frames go H.264 yuv420p at the clip's fps, the audio (trimmed or
+ffmpeg (runtime.start_tool) writes the frames as H.264 yuv420p at the clip's fps; the audio (trimmed or
 padded to the clip's duration) is muxed in as AAC, and the caller wraps the output in facegen.atomic's
 atomic_path: an error or Ctrl-C leaves no partial file. Frames render on a few threads (the numba kernels
 release the GIL) a few frames ahead of the encoder.
@@ -22,19 +22,10 @@ import numpy as np
 from facegen.atomic import check_writable
 from facegen.audio import write_wav
 from facegen.errors import FacegenError
-from facegen.runtime import progress_bar
+from facegen.runtime import progress_bar, start_tool
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
 FRAME_WINDOW = 4  # frames rendered ahead of the encoder
-
-
-def _ffmpeg() -> str:
-    import imageio_ffmpeg
-
-    try:
-        return imageio_ffmpeg.get_ffmpeg_exe()
-    except RuntimeError as exc:  # no binary for this platform
-        raise FacegenError(f"no ffmpeg binary found ({exc}): reinstall imageio-ffmpeg") from exc
 
 
 def _rate(fps: float) -> str:
@@ -64,7 +55,6 @@ def encode(
     """Pipe `count` rgb24 frames (an iterator of arrays) to ffmpeg and mux the audio; write `path`."""
     with tempfile.TemporaryDirectory(prefix="facegen-render-") as tmp:
         cmd = [
-            _ffmpeg(),
             "-hide_banner",
             "-nostats",
             "-loglevel",
@@ -117,9 +107,8 @@ def encode(
             progress_bar(total=count, unit="frame", desc="render", enabled=progress, leave=False) as bar,
         ):
             # own session: a terminal's Ctrl-C reaches only us; we stop ffmpeg ourselves
-            proc = subprocess.Popen(
-                cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True
-            )
+            proc = start_tool("ffmpeg", cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
+                              start_new_session=True)
             try:
                 for frame in frames:
                     proc.stdin.write(frame.data)
@@ -159,14 +148,6 @@ def frames_in_order(
         finally:
             for future in pending:
                 future.cancel()
-
-
-def default_threads() -> int:
-    """The CPUs this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def check_output(path: str | os.PathLike) -> Path:
