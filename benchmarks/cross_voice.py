@@ -50,7 +50,8 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
     from facegen.synth.sentences import neutral_twin
     from facegen.synth.voice_corpus import XVOICE_OFFSET
     from facegen.text import load_text_backend, text_features
-    from facegen.words import Word, read_alignment, strip_edges
+    from facegen.alignment_files import read_alignment
+    from facegen.words import Word, strip_edges
 
     run = prepare(bundle_path, corpus, "test-a", splits=_splits(test), quiet=True, warn=None)
     bundle = run.bundle

@@ -5,7 +5,7 @@ The library API, imported lazily (``import facegen`` stays light, so ``facegen -
     import facegen
 
     anim = facegen.animate("line.wav", text="What an excellent room you have, sir.", speaker="F2")
-    facegen.write_animation(anim, "line.usdc")          # .usda/.usdc/.usd/.usdz/.glb/.gltf/.npy
+    facegen.write_animation(anim, "line.usdc")          # any of facegen.exchange.extensions()
     again = facegen.read_animation("line.usdc")
     bundle = facegen.load_bundle()                       # the built-in model (or a path to your own)
 """

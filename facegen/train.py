@@ -46,6 +46,9 @@ from facegen.datasets.cache import BadSequence
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
+from facegen.runtime import threads as thread_limit
+from facegen.train_config import TrainConfig
+from facegen.train_data import Batch, PcaTargets, TrainData, load_train_data, make_batches, pca_targets
 from facegen.model import FaceModel, ModelConfig, one_hot
 from facegen.model_config import FUSIONS, MODALITIES
 from facegen.phones import PHONES
@@ -104,57 +107,14 @@ def torch_settings(threads: int | None) -> Iterator[None]:
     """Deterministic algorithms, flushed denormals, the thread count and heap reuse, restored afterwards."""
     deterministic = torch.are_deterministic_algorithms_enabled()
     warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
-    old_threads = torch.get_num_threads()
     torch.use_deterministic_algorithms(True, warn_only=True)
     torch.set_flush_denormal(True)
-    if threads:
-        torch.set_num_threads(threads)
     try:
-        with _reuse_heap():
+        with thread_limit(threads, ("torch",)), _reuse_heap():
             yield
     finally:
         torch.use_deterministic_algorithms(deterministic, warn_only=warn_only)
         torch.set_flush_denormal(False)
-        torch.set_num_threads(old_threads)
-
-
-def _round_robin(names: list, key) -> list:
-    """Interleave items by subject (F2_e01, F3_e01, …) so a prefix covers every subject."""
-    groups: dict[str, list] = {}
-    for x in names:
-        groups.setdefault(key(x), []).append(x)
-    out = []
-    for i in range(max((len(g) for g in groups.values()), default=0)):
-        out += [g[i] for g in groups.values() if i < len(g)]
-    return out
-
-
-class Batch:
-    """One sequence's tensors on the device (features kept; the target is read per step)."""
-
-    def __init__(self, item: Item, speaker: int, num_speakers: int, device: torch.device) -> None:
-        self.item = item
-        self.mel = torch.from_numpy(item.mel)[None].to(device)
-        self.text = None if item.text is None else torch.from_numpy(item.text)[None].to(device)
-        self.speaker = one_hot(speaker, num_speakers).to(device)
-        self.template = item.template.reshape(-1)
-        self.device = device
-
-        self.coefficients: torch.Tensor | None = None  # [T, K] targets when training in a PCA basis
-        self.phones: torch.Tensor | None = None  # [1, T, P] phone one-hot (models with a phone stream)
-
-    def target(self) -> torch.Tensor:
-        """Ground-truth offsets from the subject's template, [T, 3V] float32."""
-        v = self.item.vertices()
-        v -= self.template
-        return torch.from_numpy(v).to(self.device)
-
-    def loss(self, model: FaceModel, coefficient_loss=None) -> torch.Tensor:
-        if self.coefficients is not None:
-            return coefficient_loss(model.coefficients(self.mel, self.text, self.speaker, self.phones)[0],
-                                    self.coefficients)
-        out = model(self.mel, self.text, self.speaker, self.phones)
-        return torch.nn.functional.mse_loss(out.view(out.shape[1], -1), self.target())
 
 
 class _NonFinite(Exception):
@@ -327,41 +287,73 @@ def train(
     phones: bool = False,
     warn: Say | None = warn_stderr,
 ) -> TrainResult:
-    """Train a model on the dataset at `data_root` and write the best checkpoint as a bundle.
+    """Train the model `config` describes (default: the paper's setup) on the dataset at `data_root`;
+    write the best epoch's weights as a bundle to `out_bundle`.
 
-    `modalities` both|audio|text and `fusion` tensor|concat choose the network (facegen.model);
-    `text_backend` (+ `text_model_path`) the language model (facegen.text). `max_sequences` caps the
-    training and validation sequences (taken round-robin over subjects). `model_options` overrides
-    ModelConfig sizes (e.g. small models for tests). `on_bad` "skip" reports and skips unusable
-    sequences, "fail" stops at the first. `precision` (fp32, fp16, int8; see facegen.bundle) is how the
-    bundle stores its weights; `half=True` is short for precision="fp16". Checkpoints are always fp32.
-    `output` "full" is the paper's FC 3V; "pca" trains it in a `basis`-dimensional PCA basis of the training
-    motion (facegen.motion_basis; the bundle stores the folded FC 3V), where `lip_weight`, `upper_weight` and
-    `velocity_weight` add lip-vertex, upper-face and frame-to-frame terms to the loss (0: the paper's MSE). `patience`
-    stops after that many epochs without a better validation loss (None: run every epoch). `phones` adds the
-    phone stream (facegen.phones: per-frame phones from the dataset's alignment JSON) to the audio encoder.
+    The rest is how the run happens: `device` (auto, cpu, cuda) and `threads` (torch's CPU threads, None:
+    all cores); `resume` continues from the checkpoint in `checkpoint_dir` (default:
+    default_checkpoint_dir); `cache_dir` holds the dataset's features (default: the dataset's own);
+    `text_model_path` is where the text model's files are; `on_bad` "skip" reports and skips unusable
+    sequences, "fail" stops at the first; `quiet` silences progress, `warn` gets the skipped sequences
+    (None: nothing).
     """
     say = silent if quiet else say_stderr
-    warn = warn or silent
-    if modalities not in MODALITIES:
-        raise FacegenError(f"unknown modalities {modalities!r}: choose one of {', '.join(MODALITIES)}")
-    if fusion not in FUSIONS:
-        raise FacegenError(f"unknown fusion {fusion!r}: choose one of {', '.join(FUSIONS)}")
-    if epochs < 1 or batch_size < 1 or not lr > 0 or (max_sequences is not None and max_sequences < 1):
-        raise FacegenError("epochs, batch size and max sequences must be at least 1 and the learning rate "
-                           "positive")
-    if output not in ("full", "pca"):
-        raise FacegenError(f"unknown output layer {output!r}: choose full (the paper's FC 3V) or pca")
-    if output == "pca" and basis < 1:
-        raise FacegenError(f"--basis {basis} must be at least 1")
-    weights = (lip_weight, upper_weight, velocity_weight)
-    if not (min(weights) >= 0 and math.isfinite(sum(weights))):
-        raise FacegenError("--lip-weight, --upper-weight and --velocity-weight must be finite and at least 0")
-    if any(weights) and output != "pca":
-        raise FacegenError("--lip-weight, --upper-weight and --velocity-weight need --output-layer pca")
-    if patience is not None and patience < 1:
-        raise FacegenError(f"--patience {patience} must be at least 1")
-    out_bundle = Path(out_bundle)
+    out_bundle, ckpt_dir = _output_paths(Path(out_bundle), checkpoint_dir)
+    dev = select_device(device)
+    data = load_train_data(data_root, config, cache_dir, text_model_path, on_bad, warn or silent, say, quiet)
+    cfg = ModelConfig(num_vertices=data.mesh.num_vertices, num_speakers=len(config.splits.train_subjects),
+                      text_dim=data.backend.dim if data.backend is not None else 0,
+                      modalities=config.modalities, fusion=config.fusion,
+                      output_basis=config.basis if config.output == "pca" else 0,
+                      n_phones=len(PHONES) if config.phones else 0, **config.model_options)
+    basis = pca_targets(config, data, dev, say) if config.output == "pca" else None
+    signature = {
+        "model_config": cfg.to_dict(), "feature_config": data.features.to_dict(),
+        "text_backend": data.backend.id if data.backend is not None else "none",
+        "splits": config.splits.to_dict(), "seed": config.seed, "batch_size": config.batch_size,
+        "train": [it.name for it in data.train], "val": [it.name for it in data.val], "output": config.output,
+        "lip_weight": config.lip_weight, "velocity_weight": config.velocity_weight,
+        **({"upper_weight": config.upper_weight} if config.upper_weight else {}),
+    }
+    with torch_settings(threads):
+        run = _Run(config, cfg, data, basis, dev, ckpt_dir, say)
+        if resume:
+            run.resume(signature)
+        try:
+            ckpt_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FacegenError(f"cannot create the checkpoint folder {ckpt_dir} ({exc.strerror}): "
+                               "pass a writable checkpoint folder", param="checkpoint_dir") from exc
+        train_batches, val_batches = make_batches(data, config, basis, dev)
+        say(f"training {config.modalities} ({config.fusion}) on {len(train_batches)} sequences, validating "
+            f"on {len(val_batches)}, {config.epochs} epochs, device {dev}")
+        seconds = run.epochs(train_batches, val_batches, basis, signature, quiet)
+        csv_path, png_path = write_curves(run.history, ckpt_dir)
+        run.model.load_state_dict(run.best_state)
+        history, best_epoch, best_loss = run.history, run.best_epoch, run.best_loss
+        provenance = config.provenance({
+            "data": data.dataset.root.resolve().name, "epochs": len(history), "best_epoch": best_epoch,
+            "best_loss": best_loss, "loss": "val" if val_batches else "train",
+            "metrics": ({k: history[best_epoch - 1][k] for k in ("train_loss", "val_loss")}
+                        if best_epoch else {}),
+            "history": loss_history(history), "train_seconds": round(seconds, 1),
+            "train_sequences": len(train_batches), "val_sequences": len(val_batches), "device": str(dev),
+            "basis_variance": round(basis.kept, 6) if basis is not None else None})
+        from facegen.bundle import save_bundle
+
+        bundle = _make_bundle(run.model.cpu().eval(), data, list(config.splits.train_subjects), provenance)
+        save_bundle(bundle, out_bundle, precision=config.precision)
+        say(f"wrote {out_bundle} (best epoch {best_epoch}, {'validation' if val_batches else 'training'} "
+            f"loss {best_loss:.4e}); curves in {csv_path}" + (f" and {png_path}" if png_path else ""))
+    return TrainResult(bundle=out_bundle, checkpoint_dir=ckpt_dir, epochs=len(history),
+                       epochs_run=run.epochs_run, best_epoch=best_epoch, best_loss=best_loss, history=history,
+                       seconds=seconds, curves_csv=csv_path, curves_png=png_path,
+                       train_sequences=len(train_batches), val_sequences=len(val_batches),
+                       skipped=list(data.dataset.skipped))
+
+
+def _output_paths(out_bundle: Path, checkpoint_dir: str | os.PathLike | None) -> tuple[Path, Path]:
+    """The bundle's path and the checkpoint folder, both checked writable before hours of training."""
     if out_bundle.suffix.lower() != ".safetensors":
         given = out_bundle.suffix or "a name without extension"
         raise FacegenError(f"a model bundle is a .safetensors file, not {given}: use -o "
@@ -371,71 +363,9 @@ def train(
     ckpt_path = ckpt_dir / CHECKPOINT
     existing = next(p for p in (ckpt_dir.absolute(), *ckpt_dir.absolute().parents) if p.exists())
     if not existing.is_dir() or not os.access(existing, os.W_OK):
-        raise FacegenError(f"cannot write the checkpoint folder {ckpt_dir} ({existing} is not a writable folder): "
-                           "pass --checkpoint-dir to a writable folder")
-    dev = select_device(device)
-    splits = splits or Splits()
-
-    from facegen.audio import FeatureConfig, mel_filters
-
-    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, warn=warn)
-    features = FeatureConfig()
-    filters = mel_filters(features)
-    backend = None
-    if modalities in ("both", "text"):
-        from facegen.text import load_text_backend
-
-        backend = load_text_backend(text_backend, text_model_path)
-    train_seqs = dataset.split("train", splits)
-    val_seqs = dataset.split("val", splits)
-    if max_sequences is not None:
-        train_seqs = _round_robin(train_seqs, lambda s: s.subject)[:max_sequences]
-        val_seqs = _round_robin(val_seqs, lambda s: s.subject)[:max_sequences]
-    say(f"features of {len(train_seqs)} training and {len(val_seqs)} validation sequences "
-        f"(cached in {dataset.cache_dir})")
-    train_items = dataset.load(train_seqs, features, filters, backend, progress=not quiet)
-    val_items = dataset.load(val_seqs, features, filters, backend, progress=not quiet)
-    if not train_items:
-        raise FacegenError(f"no usable training sequence in {dataset.root} for subjects "
-                           f"{' '.join(splits.train_subjects)}: check the files named above and the split "
-                           "options")
-    mesh = dataset.mesh
-    if mesh.num_vertices != train_items[0].template.shape[0]:
-        raise FacegenError(f"{dataset.root}/BIWI.ply has {mesh.num_vertices} vertices but the templates have "
-                           f"{train_items[0].template.shape[0]}: use the face list of this dataset")
-
-    speakers = list(splits.train_subjects)
-    cfg = ModelConfig(num_vertices=mesh.num_vertices, num_speakers=len(speakers),
-                      text_dim=backend.dim if backend is not None else 0, modalities=modalities,
-                      fusion=fusion, output_basis=basis if output == "pca" else 0,
-                      n_phones=len(PHONES) if phones else 0, **(model_options or {}))
-    coefficients, coefficient_loss, val_loss_fn = {}, None, None
-    if output == "pca":
-        from facegen.motion_basis import CoefficientLoss, basis_digest, fit_basis, project
-
-        say(f"PCA basis of the training motion ({basis} directions)")
-        pca, pca_mean, kept = fit_basis(train_items, basis, seed=seed)
-        say(f"the basis keeps {100 * kept:.3f} % of the training motion's variance")
-        folder = dataset.cache_dir / f"coefficients-{basis_digest(pca, pca_mean)}"
-        folder.mkdir(parents=True, exist_ok=True)
-        for it in train_items + val_items:
-            path = folder / f"{it.name}.npy"
-            if path.is_file():
-                coefficients[it.name] = np.load(path)
-            else:
-                coefficients[it.name] = project(it, pca, pca_mean)
-                with atomic_path(path) as tmp:
-                    np.save(tmp, coefficients[it.name])
-        coefficient_loss = CoefficientLoss(pca, mesh.regions.get("lips"), lip_weight, velocity_weight, dev,
-                                           upper=mesh.regions.get("upper_face"), upper_weight=upper_weight)
-        val_loss_fn = CoefficientLoss(pca, None)
-    signature = {
-        "model_config": cfg.to_dict(), "feature_config": features.to_dict(),
-        "text_backend": backend.id if backend is not None else "none", "splits": splits.to_dict(),
-        "seed": seed, "batch_size": batch_size, "train": [it.name for it in train_items],
-        "val": [it.name for it in val_items], "output": output, "lip_weight": lip_weight,
-        "velocity_weight": velocity_weight, **({"upper_weight": upper_weight} if upper_weight else {}),
-    }
+        raise FacegenError(f"cannot write the checkpoint folder {ckpt_dir} ({existing} is not a writable "
+                           "folder): pass a writable checkpoint folder", param="checkpoint_dir")
+    return out_bundle, ckpt_dir
 
     with torch_settings(threads):
         torch.manual_seed(seed)
@@ -493,10 +423,9 @@ def train(
         say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
             f"{len(val_batches)}, {epochs} epochs, device {dev}")
         run_start = last_png = time.perf_counter()
-        epochs_run = 0
-        for epoch in range(done, epochs):
-            if patience is not None and best_epoch and epoch - best_epoch >= patience:
-                say(f"no better validation loss for {patience} epochs: stopping after epoch {epoch}")
+        for epoch in range(self.done, config.epochs):
+            if config.patience is not None and self.best_epoch and epoch - self.best_epoch >= config.patience:
+                say(f"no better validation loss for {config.patience} epochs: stopping after epoch {epoch}")
                 break
             t0 = time.perf_counter()
             order = epoch_order(seed, epoch, len(train_batches))

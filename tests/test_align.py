@@ -14,7 +14,8 @@ from facegen.align_pieces import loud_frames, pieces, scored
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import Speech, espeak_to_cmu, pronounce, synthesize
-from facegen.words import Word, normalize_transcript, read_alignment, write_alignment
+from facegen.alignment_files import read_alignment, write_alignment
+from facegen.words import Word, normalize_transcript
 
 SENTENCES = [
     ("The quick brown fox jumps over the lazy dog.", "en-us", 50, 170),

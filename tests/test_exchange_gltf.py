@@ -416,7 +416,7 @@ def test_rig_option_errors(clip, tmp_path, grid_mesh):
         "unknown rig": (clip, "x.glb", {"rig": "metahuman"}, "unknown rig 'metahuman'"),
         "pca sizing": (clip, "x.glb", {"rig": "arkit", "morph_targets": 8}, "--morph-targets size the PCA basis"),
         "usd points": (clip, "x.usda", {"rig": "arkit", "mode": "points"}, "drop --usd-mode points"),
-        "other format": (clip, "x.npy", {"rig": "arkit"}, "--rig does not apply to .npy files"),
+        "other format": (clip, "x.npy", {"rig": "arkit"}, "rig does not apply to .npy files"),
         "no regions": (make_animation(grid_mesh, frames=5), "x.glb", {"rig": "arkit"}, "region"),
     }
     for name, (anim, file, options, message) in bad.items():
@@ -441,7 +441,7 @@ def test_cli_rig_is_checked_before_any_work(tmp_path, grid_mesh):
     make_bundle(grid_mesh, tmp_path / "grid.safetensors")
     missing = tmp_path / "nowhere.wav"
     for args, message in (
-        (["-o", tmp_path / "out.npy"], "--rig does not apply to .npy files"),
+        (["-o", tmp_path / "out.npy"], "rig does not apply to .npy files"),
         (["-o", tmp_path / "out.glb", "--model", tmp_path / "grid.safetensors"], "region"),
     ):
         done = _cli("animate", missing, "--no-text", "--rig", "arkit", *args)

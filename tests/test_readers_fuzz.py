@@ -79,7 +79,7 @@ ALIGNMENT_JSON = st.recursive(
 
 @pytest.mark.parametrize("suffix", [".json", ".TextGrid", ".csv"])
 def test_alignment_reader_on_arbitrary_bytes(suffix, tmp_path):
-    from facegen.words import read_alignment, read_phones
+    from facegen.alignment_files import read_alignment, read_phones
 
     strategy = {".json": st.one_of(_noise(), ALIGNMENT_JSON),
                 ".TextGrid": st.one_of(_noise(b'File type = "ooTextFile"\nObject class = "TextGrid"\n'),
@@ -153,7 +153,8 @@ WORDS = st.lists(st.tuples(st.from_regex(r"[A-Za-z]([A-Za-z']{0,10}[A-Za-z])?", 
 @SETTINGS
 @given(WORDS, st.sampled_from([".json", ".TextGrid"]))
 def test_alignment_round_trip(tmp_path_factory, spec, suffix):
-    from facegen.words import Word, read_alignment, write_alignment
+    from facegen.alignment_files import read_alignment, write_alignment
+    from facegen.words import Word
 
     t, words = 0.0, []
     for text, length, pause in spec:

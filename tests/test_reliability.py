@@ -158,7 +158,7 @@ def test_tar_member_bigger_than_any_frame_refused_before_reading(tmp_path):
 
 @pytest.mark.parametrize("kind", ["json", "csv"])
 def test_alignment_with_impossible_word_rate_refused(tmp_path, kind):
-    from facegen.words import read_alignment
+    from facegen.alignment_files import read_alignment
 
     n = 2000
     path = tmp_path / f"words.{kind}"
@@ -182,7 +182,7 @@ def test_transcript_with_impossible_word_rate_refused_before_aligning():
 
 
 def test_deeply_nested_alignment_json_is_a_user_error(tmp_path):
-    from facegen.words import read_alignment
+    from facegen.alignment_files import read_alignment
 
     path = tmp_path / "words.json"
     path.write_text("[" * 100_000 + "]" * 100_000)

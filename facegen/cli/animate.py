@@ -5,8 +5,16 @@ from __future__ import annotations
 import click
 
 from facegen.cli.command import Command
-from facegen.cli.options import (DEVICE, FiniteRange, morph_targets_option, one_of, progress, protect_inputs,
-                                 read_text, usd_clips_option)
+from facegen.cli.options import (
+    DEVICE,
+    FiniteRange,
+    morph_targets_option,
+    one_of,
+    progress,
+    protect_inputs,
+    read_text,
+    usd_clips_option,
+)
 from facegen.exchange import extensions
 
 
@@ -51,53 +59,37 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
             usd_mode, usd_clips, rig, morph_targets, tolerance, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.animator import Animator
-    from facegen.atomic import check_writable
-    from facegen.exchange import check_write_options, format_module, format_of, import_writer, write_animation
-    from facegen.exchange.wav import is_same_file, sidecar_path
+    from facegen.atomic import Transaction
+    from facegen.exchange.plan import plan_write
 
     one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
-    format_module(output)  # an unknown extension or unwritable folder fails before any work
-    check_writable(output)
-    sidecar = sidecar_path(output)
-    if not is_same_file(audio, sidecar):
-        check_writable(sidecar)
-    protect_inputs([output, sidecar, preview], transcript=text_file,
-                   alignment=alignment, model=model, template=template)
     options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig),
                                  ("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None}
-    check_write_options(output, options)
+    # everything the path and options decide fails before any work: extension, folders, sidecar, options
+    plan = plan_write(output, options=options, audio_source=audio, preview=preview)
+    protect_inputs(plan.outputs, transcript=text_file, alignment=alignment, model=model, template=template)
     if preview:
         from facegen.render import check_output
 
         check_output(preview)
     transcript = read_text(text, text_file)
     animator = Animator(model, text_model=text_model, device=device)
-    if rig == "arkit" or format_of(output).arkit:  # ARKit weights need the rig's regions: checked before work
-        from facegen.exchange.basis import check_rig
-
+    if plan.rig == "arkit":  # ARKit weights need the rig's regions: checked before work
         # the model loads for the check: its transcript's alignment starts first, so the two overlap
         animator.align_ahead(audio, text=transcript, alignment=alignment, no_text=no_text)
-        check_rig("arkit", animator.mesh(template))
-        if "mode" in format_of(output).options:
-            options.setdefault("mode", "blendshapes")  # USD: the ARKit shapes are UsdSkel blend shapes
+        plan.check_template(animator.mesh(template))
     say = progress(quiet)
-    # writers that read frames block by block: no [T, V, 3] array in memory
-    stream = format_of(output).streams_with(options) and not preview
+    # plan.streams: the writer reads frames block by block, no [T, V, 3] array in memory
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
-                            template=template, stream=stream, progress=say, warn=progress(False),
-                            meanwhile=lambda: import_writer(output))
-    written = write_animation(anim, output, audio_source=audio, **options)
-    say(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
-    if preview:
-        from facegen.render import render_animation
+                            template=template, stream=plan.streams, progress=say, warn=progress(False),
+                            meanwhile=plan.import_writer)
+    with Transaction():  # all or nothing: no animation without the preview asked for
+        written = plan.write(anim)
+        say(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
+        if preview:
+            from facegen.render import render_animation
 
-        try:
             result = render_animation(anim, preview, progress=not quiet)
-        except BaseException:  # all or nothing: no animation without the preview asked for
-            for path in written:
-                if not is_same_file(audio, path):
-                    path.unlink(missing_ok=True)
-            raise
-        for note in result.notes:
-            say(note)
-        say(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")
+            for note in result.notes:
+                say(note)
+            say(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")

@@ -327,7 +327,7 @@ class Dataset:
         cached = self.cache_dir / "phones" / f"{seq.name}-{key}.json"
         if not cached.is_file():
             from facegen import align
-            from facegen.words import write_alignment
+            from facegen.alignment_files import write_alignment
 
             samples, sr = read_sequence_audio(seq)
             try:
@@ -342,7 +342,7 @@ class Dataset:
     def words(self, seq: Sequence, samples: np.ndarray, sr: int) -> list:
         """Word timings: the user's alignment file, else the transcript aligned once (and cached)."""
         from facegen import align
-        from facegen.words import read_alignment, write_alignment
+        from facegen.alignment_files import read_alignment, write_alignment
 
         duration = len(samples) / sr
         if seq.alignment is not None:
@@ -442,7 +442,7 @@ class DatasetWriter:
         if transcript is not None:
             self.write_transcript(name, transcript)
         if words is not None:
-            from facegen.words import write_alignment
+            from facegen.alignment_files import write_alignment
 
             (self.root / "alignments").mkdir(exist_ok=True)
             write_alignment(words, self.root / "alignments" / f"{name}.json")  # atomically

@@ -24,7 +24,7 @@ finished sequences (so an interrupted run resumes); a folder made with other par
 
 Determinism: the same parameters give byte-identical sequence files. libespeak-ng keeps waveform state
 between calls (pitch flutter, gain control) that no API resets, so every speaker is generated in a fresh
-process (`python -m facegen.synth.corpus`, never forked) that synthesises that speaker's sentences in
+process (runtime.process_pool: spawned, never forked) that synthesises that speaker's sentences in
 order from e01 up to the last one asked for — also those it does not write (synthesis takes ~0.1 s).
 Parallelism is per speaker.
 
@@ -41,13 +41,8 @@ import hashlib
 import json
 import os
 import shutil
-import subprocess
-import sys
-import tempfile
-import threading
 import time
 from collections.abc import Iterable
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -56,7 +51,7 @@ import numpy as np
 from facegen.atomic import atomic_path
 from facegen.datasets.splits import parse_numbers, parse_subjects, sequence_name
 from facegen.errors import FacegenError
-from facegen.runtime import progress_bar
+from facegen.runtime import process_pool, progress_bar, threads
 from facegen.synth.sentences import SENTENCES
 
 CORPUS_VERSION = 1  # bump when the face, rig, voices or sentences change what is generated
@@ -299,69 +294,71 @@ def _write_static(out: Path, writer, wanted: dict[str, tuple[int, ...]], read_te
 
 def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, workers: int, progress: bool,
          manifest: dict, report: CorpusReport) -> None:
-    """Generate `todo` with one fresh worker process per speaker (`workers` at a time); record each
-    finished sequence in the manifest as the worker reports it."""
+    """Generate `todo` with one fresh worker process per speaker (`workers` at a time: a spawn pool, a new
+    process per task); record each finished sequence in the manifest as the worker reports it."""
+    import multiprocessing
+    import queue
+
     total = sum(len(v) for v in todo.values())
     order = sorted(todo, key=lambda s: -len(todo[s]))  # longest jobs first
     bar = progress_bar(total=total, desc="synth", unit="seq", enabled=progress)
-    lock = threading.Lock()
-    procs: list[subprocess.Popen] = []
-    stopping = threading.Event()
+    messages = multiprocessing.get_context("spawn").Queue()  # (name, info) of each sequence written
 
-    def record(line: str) -> None:
-        message = json.loads(line)
-        with lock:
-            manifest["sequences"][message["name"]] = message["info"]
-            _write_corpus_manifest(out, manifest)
-            report.generated.append(message["name"])
-            report.durations[message["name"]] = message["info"]["duration"]
-            bar.update(1)
+    def record(name: str, info: dict) -> None:
+        manifest["sequences"][name] = info
+        _write_corpus_manifest(out, manifest)
+        report.generated.append(name)
+        report.durations[name] = info["duration"]
+        bar.update(1)
 
-    env = dict(os.environ)
-    package_root = str(Path(__file__).resolve().parents[2])
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        env.setdefault(var, "1")  # BLAS sums differ with the thread count: keep it independent of `workers`
-
-    def job(speaker: str) -> None:
-        if stopping.is_set():
-            return
-        numbers = ",".join(str(n) for n in todo[speaker])
-        cmd = [sys.executable, "-m", "facegen.synth.corpus", str(out), speaker, numbers, str(seed), repr(fps)]
-        with tempfile.TemporaryFile("w+") as err, \
-                subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, env=env) as proc:
-            with lock:
-                procs.append(proc)
-            assert proc.stdout is not None
-            for line in proc.stdout:
-                if line.strip():
-                    record(line)
-            code = proc.wait()
-            err.seek(0)
-            errors = err.read()
-        if code != 0 and not stopping.is_set():
-            last = (errors.strip().splitlines() or [f"exit status {code}"])[-1]
-            if code == 2:  # a FacegenError: its message is the last line
-                raise FacegenError(last)
-            raise FacegenError(f"generating speaker {speaker} failed ({last}); rerun to resume")
-
+    # BLAS sums differ with the thread count: one thread in every worker, independent of `workers` (the
+    # workers inherit the environment, so their libraries start with one thread)
+    pool_size = min(workers, len(order))
     try:
-        with ThreadPoolExecutor(max_workers=min(workers, len(order))) as pool:
-            futures = [pool.submit(job, s) for s in order]
+        with threads(1, ("env",)), process_pool(pool_size, start="spawn", max_tasks_per_child=1,
+                                                initializer=_start_speaker_worker,
+                                                initargs=(messages,)) as pool:
+            futures = {pool.submit(_speaker_job, str(out), s, todo[s], seed, fps): s for s in order}
             try:
-                for future in as_completed(futures):
-                    future.result()
+                received = 0
+                while received < total:
+                    try:
+                        record(*messages.get(timeout=0.2))
+                        received += 1
+                    except queue.Empty:
+                        for future in (f for f in futures if f.done()):
+                            _check_speaker(future, futures[future])
             except BaseException:
-                stopping.set()
                 for future in futures:
                     future.cancel()
-                with lock:
-                    for proc in procs:
-                        if proc.poll() is None:
-                            proc.kill()
+                pool.stop()
                 raise
     finally:
         bar.close()
+        messages.close()
+
+
+def _check_speaker(future, speaker: str) -> None:
+    """Raise the error of a speaker's finished job, if any: a FacegenError as it is, anything else (a
+    worker that died) as a FacegenError naming the speaker."""
+    error = future.exception()
+    if isinstance(error, FacegenError):
+        raise error
+    if error is not None:
+        raise FacegenError(f"generating speaker {speaker} failed ({error or type(error).__name__}); "
+                           "rerun to resume") from error
+
+
+_messages = None  # in a speaker's worker process: the queue of the sequences it has written
+
+
+def _start_speaker_worker(messages) -> None:
+    """A speaker's worker starts: the queue to report to; its stderr (libespeak-ng's messages) silenced."""
+    global _messages
+    _messages = messages
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    os.close(devnull)
 
 
 def _speaker_job(out: str, speaker: str, numbers: tuple[int, ...], seed: int, fps: float) -> None:
@@ -384,19 +381,4 @@ def _speaker_job(out: str, speaker: str, numbers: tuple[int, ...], seed: int, fp
                               transcript=SENTENCES[n], words=speech.words)
         info = {"frames": len(vertices), "duration": round(speech.duration, 6),
                 "sample_rate": int(speech.sample_rate)}
-        print(json.dumps({"name": name, "info": info}), flush=True)
-
-
-def _worker_main(argv: list[str]) -> int:
-    """python -m facegen.synth.corpus OUT SPEAKER NUMBERS SEED FPS (internal: one speaker's job)."""
-    out, speaker, numbers, seed, fps = argv
-    try:
-        _speaker_job(out, speaker, tuple(int(n) for n in numbers.split(",")), int(seed), float(fps))
-    except FacegenError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_worker_main(sys.argv[1:]))
+        _messages.put((name, info))

@@ -29,7 +29,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -37,6 +37,7 @@ import numpy as np
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
+from facegen.runtime import process_pool, set_threads
 
 VERSION = 1
 MANIFEST = "voices.json"
@@ -165,8 +166,9 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
 
 
 def _work(takes: list[Take], out: str, augmentation: bool) -> list[dict]:
-    """One worker's share (a fresh process: one BLAS thread, its own libespeak-ng)."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    """One worker's share (a fresh process: one thread for the libraries it loads from now on, its own
+    libespeak-ng)."""
+    set_threads(1, ("env",))
     done = []
     for take in takes:
         try:
@@ -230,9 +232,7 @@ def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, worke
         with atomic_path(manifest_path) as tmp:
             tmp.write_text(json.dumps(manifest, indent=0))
 
-    import multiprocessing
-
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with process_pool(workers, start="spawn") as pool:
         futures = [pool.submit(_work, chunk, str(out), augmentation) for chunk in chunks if chunk]
         for future in as_completed(futures):
             for entry in future.result():

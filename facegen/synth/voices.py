@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import re
-import shutil
 import subprocess
 import tempfile
 from dataclasses import dataclass
@@ -23,6 +22,8 @@ import numpy as np
 
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
+from facegen.phonetics import RADIO_TO_CMU, is_pause
+from facegen.runtime import run_tool, tool_path
 
 Timing = tuple[str, float, float]
 
@@ -96,11 +97,14 @@ class Engine:
 
     def executable(self) -> str:
         """The engine's binary, or a FacegenError naming the Debian packages to install."""
-        path = shutil.which(self.binary)
-        if path is None:
-            raise FacegenError(f"the {self.name} speech synthesiser is not installed ({self.binary} not on "
-                               f"PATH): run `{self.install}` as root, or `make voices`")
-        return path
+        return tool_path(self.binary, f"run `{self.install}` as root, or `make voices`")
+
+    def is_installed(self) -> bool:
+        """Whether the engine's binary is on PATH."""
+        try:
+            return bool(self.executable())
+        except FacegenError:
+            return False
 
     def installed_ids(self) -> set[str]:
         """The ids of this engine's voices installed now (empty when the engine itself is not)."""
@@ -108,9 +112,10 @@ class Engine:
 
     def synthesize(self, text: str, voice: Voice, rate: float) -> Utterance:
         """`text` said by `voice` at `rate` (checked by the module's `synthesize`)."""
-        exe = self.executable()
+        """`exe`: the binary's name, for _run."""
+        self.executable()
         with tempfile.TemporaryDirectory(prefix=f"facegen-{self.name}-") as tmp:
-            return self._synthesize(exe, text, voice, rate, Path(tmp))
+            return self._synthesize(self.binary, text, voice, rate, Path(tmp))
 
     def _synthesize(self, exe: str, text: str, voice: Voice, rate: float, tmp: Path) -> Utterance:
         raise NotImplementedError
@@ -121,10 +126,10 @@ class Engine:
 
 
 def _run(cmd: list[str], what: str, timeout: float, cwd: Path | None = None) -> str:
-    """Run a synthesiser; its stdout, or a FacegenError carrying the last line of its stderr."""
+    """Run a synthesiser (cmd[0]: its binary's name, runtime.run_tool); its stdout, or a FacegenError
+    carrying the last line of its stderr."""
     try:
-        proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=timeout, cwd=cwd,
-                              stdin=subprocess.DEVNULL, errors="replace")
+        proc = run_tool(cmd[0], cmd[1:], text=True, timeout=timeout, cwd=cwd)
     except subprocess.TimeoutExpired as exc:
         raise FacegenError(f"{what} did not finish within {timeout:.0f} s: try a shorter text") from exc
     except OSError as exc:
@@ -161,8 +166,7 @@ class Flite(Engine):
     )
 
     def installed_ids(self) -> set[str]:
-        exe = shutil.which(self.binary)
-        return set() if exe is None else _flite_voice_list(exe)
+        return _flite_voice_list(self.binary) if self.is_installed() else set()
 
     def _synthesize(self, exe: str, text: str, voice: Voice, rate: float, tmp: Path) -> Utterance:
         if voice.id not in _flite_voice_list(exe):
@@ -228,8 +232,7 @@ class Festival(Engine):
     )
 
     def installed_ids(self) -> set[str]:
-        exe = shutil.which(self.binary)
-        return set() if exe is None else _festival_voice_list(exe)
+        return _festival_voice_list(self.binary) if self.is_installed() else set()
 
     def _synthesize(self, exe: str, text: str, voice: Voice, rate: float, tmp: Path) -> Utterance:
         wav, script = tmp / "out.wav", tmp / "say.scm"
