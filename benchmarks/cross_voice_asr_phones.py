@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     from facegen.errors import FacegenError
     from facegen.evaluate import _lipsync_geometry, _lipsync_row, pool, prepare, sequence_metrics
     from facegen.lipsync import format_lipsync, pool_lipsync
-    from facegen.phones import phone_frames
+    from facegen.phonetics import phone_frames
 
     splits = Splits(train_subjects=("F2", "F3", "F4", "M3", "M4", "M5"), test_subjects=(),
                     train_sentences="49-1776", val_sentences="1777-1992", test_sentences=args.test_sentences)

@@ -1,5 +1,5 @@
 """libespeak-ng (via ctypes): speech synthesis with the true word and phone timings, grapheme-to-phoneme
-(`phonemize`) and the mapping of espeak's phonemes to pocketsphinx's (CMU) phones (`pronounce`).
+(`phonemize`) and a word's pocketsphinx (CMU) phones (`pronounce`, through facegen.phonetics' table).
 
 The library comes from the PyPI package `espeakng-loader` and is loaded once per process. It is not
 thread-safe, so every call into it holds one lock.
@@ -17,6 +17,7 @@ import numpy as np
 
 from facegen.audio import resample
 from facegen.errors import FacegenError
+from facegen.phonetics import espeak_to_cmu
 from facegen.words import Word, strip_edges
 
 # speak_lib.h constants
@@ -282,52 +283,6 @@ def phonemize(word: str, voice: str = "en-us") -> list[str]:
                 break
             for chunk in result.decode("utf-8", "replace").split():
                 out.extend(p for p in chunk.split("|") if p)
-    return out
-
-
-# --------------------------------------------------------------------------------------------------
-# espeak phonemes → pocketsphinx (CMU) phones
-
-_ESPEAK_TO_CMU = {
-    # vowels (espeak-ng English mnemonics)
-    "@": "AH", "@2": "AH", "@5": "AH", "@L": "AH L", "3": "ER", "3:": "ER", "a": "AE", "a#": "AH",
-    "A:": "AA", "A@": "AA R", "A#": "AE", "aa": "AE", "aI": "AY", "aI@": "AY ER", "aI3": "AY ER",
-    "aU": "AW", "aU@": "AW ER", "E": "EH", "e": "EH", "e@": "EH R", "eI": "EY", "i": "IY", "i:": "IY",
-    "I": "IH", "I#": "IH", "I2": "IH", "i@": "IY AH", "i@3": "IY R", "0": "AA", "O": "AO", "O:": "AO",
-    "O2": "AO", "O@": "AO R", "o@": "AO R", "OI": "OY", "oU": "OW", "oU#": "OW", "o": "OW", "u": "UW",
-    "u:": "UW", "U": "UH", "U@": "UH R", "V": "AH", "IR": "IH R", "VR": "AH R", "y": "UW", "Y": "UW",
-    # consonants
-    "b": "B", "d": "D", "D": "DH", "dZ": "JH", "f": "F", "g": "G", "h": "HH", "j": "Y", "k": "K",
-    "l": "L", "m": "M", "n": "N", "N": "NG", "p": "P", "r": "R", "r-": "R", "s": "S", "S": "SH", "t": "T",
-    "T": "TH", "tS": "CH", "v": "V", "w": "W", "z": "Z", "Z": "ZH", "t#": "T", "d#": "D", "t2": "T",
-    "d2": "D", "n-": "N", "m-": "M", "l-": "L", "x": "K", "C": "HH", "W": "W", "hw": "W", "l/": "L",
-    "l/2": "L", "z/2": "Z", "R": "R", "*": "R", "r/": "R", "?": "T",
-}
-# pocketsphinx's en-us phone set, what espeak_to_cmu maps to
-CMU_VOWELS = ("AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW")
-CMU_CONSONANTS = ("B", "CH", "D", "DH", "F", "G", "HH", "JH", "K", "L", "M", "N", "NG", "P", "R", "S", "SH",
-                  "T", "TH", "V", "W", "Y", "Z", "ZH")
-_STRESS = str.maketrans("", "", "'`,%=")
-_LONGEST = max(len(k) for k in _ESPEAK_TO_CMU)
-
-
-def espeak_to_cmu(phonemes: list[str]) -> list[str]:
-    """Map espeak phoneme mnemonics to pocketsphinx (CMU) phones; unknown symbols are skipped."""
-    out: list[str] = []
-    for ph in phonemes:
-        ph = ph.translate(_STRESS)
-        i = 0
-        while i < len(ph):  # longest match, so "aI@" or unusual compounds still map
-            for size in range(min(_LONGEST, len(ph) - i), 0, -1):
-                cmu = _ESPEAK_TO_CMU.get(ph[i:i + size])
-                if cmu:
-                    for p in cmu.split():
-                        if not out or out[-1] != p or p not in CMU_CONSONANTS:  # "bb" → B
-                            out.append(p)
-                    i += size
-                    break
-            else:
-                i += 1
     return out
 
 

@@ -11,11 +11,11 @@ import soundfile as sf
 from facegen.datasets.biwi import Dataset
 from facegen.datasets.splits import Splits, sequence_name
 from facegen.errors import FacegenError
+from facegen.face.procedural import NUM_VERTICES
+from facegen.face.rig import CHANNELS
+from facegen.phonetics import VOWEL_VISEMES, phone_visemes
 from facegen.synth import corpus
-from facegen.synth.curves import VOWELS, phone_visemes
-from facegen.synth.face import NUM_VERTICES
 from facegen.synth.lexicon import HELD_OUT_LEXICON, TRAIN_LEXICON, emotional_words
-from facegen.synth.rig import CHANNELS
 from facegen.synth.sentences import SENTENCES
 
 SPEAKERS = ("F2", "M1")
@@ -111,7 +111,7 @@ def test_lips_close_on_bilabials_and_open_on_vowels(small, f2):
             vis = phone_visemes(p.text)
             if vis == ("PBM",):
                 closed += list(gap[frames])
-            elif vis[0] in VOWELS and vis[0] in ("AA", "AE", "EH") and p.end - p.start > 0.06:
+            elif vis[0] in VOWEL_VISEMES and vis[0] in ("AA", "AE", "EH") and p.end - p.start > 0.06:
                 # inside the vowel, 20 ms from its edges: libespeak-ng's phone times move by up to a pitch
                 # period (~10 ms) with state left by earlier calls, which puts a frame of the transition in
                 inner = np.nonzero((t >= p.start + 0.02) & (t <= p.end - 0.02))[0]

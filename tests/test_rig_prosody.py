@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from facegen.errors import FacegenError
-from facegen.synth.curves import loudness_envelope, phone_stress, phone_visemes, viseme_curves
-from facegen.synth.rig import LOWER_CHANNELS
+from facegen.face.rig import LOWER_CHANNELS
+from facegen.phonetics import phone_stress, phone_visemes
+from facegen.synth.curves import loudness_envelope, viseme_curves
 
 JAW = LOWER_CHANNELS.index("jaw_open")
 CLOSE = LOWER_CHANNELS.index("lip_close")

@@ -51,7 +51,7 @@ def test_voice_says_a_sentence_with_its_timings(name):
 
     said = [p for p, _, _ in utt.phones]
     if utt.alphabet == "espeak":  # espeak's own mnemonics (the rig reads them); the same phones in CMU
-        from facegen.espeak import espeak_to_cmu
+        from facegen.phonetics import espeak_to_cmu
 
         said = espeak_to_cmu(said)
         assert len(said) == len(PHONES) and sum(a != b for a, b in zip(said, PHONES, strict=True)) <= 1  # accents

@@ -1,4 +1,4 @@
-"""The animation curves that drive the rig (facegen.synth.rig), from timings and the audio's loudness.
+"""The animation curves that drive the rig (facegen.face.rig), from timings and the audio's loudness.
 
 `viseme_curves` (lips and jaw from the phones, with coarticulation and prosody), `expression_curves`
 (upper face from emotional words only) and `blink_curves` (random blinks); `motion_curves` all of them.
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facegen.errors import FacegenError
+from facegen.face.rig import EXPRESSIONS, LOWER_CHANNELS, UPPER_CHANNELS
+from facegen.phonetics import VOWEL_VISEMES, check_alphabet, phone_stress, phone_visemes
 from facegen.synth.lexicon import LEXICON, Emotion, lookup
-from facegen.synth.rig import EXPRESSIONS, LOWER_CHANNELS, UPPER_CHANNELS
 
 
 # ---------------------------------------------------------------------------------------------- style
@@ -48,7 +48,7 @@ def _v(**kw: float) -> np.ndarray:
     return np.array([kw.get(c, 0.0) for c in LOWER_CHANNELS])
 
 
-# targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme
+# targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme (a phone's visemes: facegen.phonetics)
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
     "PBM": (_v(jaw_open=0.04, lip_close=1.0), 1.5, 2.5),
@@ -76,78 +76,7 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "UW": (_v(jaw_open=0.1, lip_round=1.0), 2.0, 3.5),
 }
 
-VOWELS = frozenset({"AA", "AE", "AH", "ER", "EH", "IY", "IH", "AO", "OW", "UH", "UW"})
 VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
-
-# espeak-ng phoneme mnemonics (English voices) -> viseme sequence (diphthongs: two or three parts)
-PHONEME_VISEMES: dict[str, tuple[str, ...]] = {
-    **{p: ("PBM",) for p in ("p", "b", "m", "m-")},
-    **{p: ("FV",) for p in ("f", "v")},
-    **{p: ("TH",) for p in ("T", "D")},
-    **{p: ("SZ",) for p in ("s", "z", "z#")},
-    **{p: ("SH",) for p in ("S", "Z", "tS", "dZ", "S;", "Z;")},
-    **{p: ("TDN",) for p in ("t", "d", "n", "t#", "d#", "n-", "t2", "d2", "?", "*", "t^")},
-    **{p: ("L",) for p in ("l", "l/", "L", "@L", "l-", "l#")},
-    **{p: ("R",) for p in ("r", "r-", "r/", "R", "3", "@r", "r#")},
-    **{p: ("KG",) for p in ("k", "g", "N", "x", "C", "k#", "g#")},
-    **{p: ("H",) for p in ("h", "h#")},
-    **{p: ("W",) for p in ("w", "hw", "W")},
-    **{p: ("Y",) for p in ("j", "j#")},
-    **{p: ("AA",) for p in ("a", "A:", "A", "aa", "a#", "A#", "a2", "0", "V", "A@")},
-    **{p: ("AE",) for p in ("&", "a1")},
-    **{p: ("AH",) for p in ("@", "@2", "@5", "@1", "@-", "@#", "V#")},
-    **{p: ("ER",) for p in ("3:", "3:r", "@r")},
-    **{p: ("EH",) for p in ("E", "e", "E2", "E#")},
-    **{p: ("IY",) for p in ("i:", "i", "i#")},
-    **{p: ("IH",) for p in ("I", "I#", "I2", "I2#", "y", "Y")},
-    **{p: ("AO",) for p in ("O:", "O", "O2", "O#", "0#", "Q")},
-    **{p: ("OW",) for p in ("o", "o:")},
-    **{p: ("UH",) for p in ("U", "U#")},
-    **{p: ("UW",) for p in ("u:", "u", "U:", "u#")},
-    "aI": ("AA", "IH"), "aU": ("AA", "UH"), "eI": ("EH", "IH"), "oU": ("OW", "UW"), "OI": ("AO", "IH"),
-    "aI@": ("AA", "IH", "AH"), "aU@": ("AA", "UH", "AH"), "aI3": ("AA", "IH", "ER"), "aU3": ("AA", "UH", "ER"),
-    "i@": ("IY", "AH"), "i@3": ("IY", "ER"), "e@": ("EH", "AH"), "U@": ("UH", "AH"), "A@r": ("AA", "ER"),
-    "O@": ("AO", "AH"), "o@": ("OW", "AH"), "e@r": ("EH", "ER"), "0u": ("OW", "UW"), "@U": ("AH", "UW"),
-    "eI#": ("EH", "IH"), "IR": ("IH", "ER"), "VR": ("AH", "ER"),
-}
-_STRESS = str.maketrans("", "", "'\",%=!")
-
-# CMU/ARPAbet phones (pocketsphinx, Festival and Flite after mapping; stress digits dropped) -> visemes
-CMU_VISEMES: dict[str, tuple[str, ...]] = {
-    **{p: ("PBM",) for p in ("P", "B", "M")}, **{p: ("FV",) for p in ("F", "V")},
-    **{p: ("TH",) for p in ("TH", "DH")}, **{p: ("SZ",) for p in ("S", "Z")},
-    **{p: ("SH",) for p in ("SH", "ZH", "CH", "JH")}, **{p: ("TDN",) for p in ("T", "D", "N", "DX")},
-    "L": ("L",), "R": ("R",), **{p: ("KG",) for p in ("K", "G", "NG")}, "HH": ("H",), "W": ("W",),
-    "Y": ("Y",), **{p: (p,) for p in ("AA", "AE", "AH", "ER", "EH", "IY", "IH", "AO", "OW", "UH", "UW")},
-    "AW": ("AA", "UH"), "AY": ("AA", "IH"), "EY": ("EH", "IH"), "OY": ("AO", "IH"),
-}
-ALPHABETS = ("espeak", "cmu")
-
-
-def phone_visemes(mnemonic: str, alphabet: str = "espeak") -> tuple[str, ...]:
-    """The viseme sequence of one phone: an espeak phoneme mnemonic, or a CMU phone (`alphabet="cmu"`,
-    stress digits allowed: "AH1"); silence and unknown phones are neutral ("rest")."""
-    if alphabet == "cmu":
-        return CMU_VISEMES.get(mnemonic.strip().upper().rstrip("012"), ("rest",))
-    name = mnemonic.translate(_STRESS).strip()
-    if name.startswith("_") or not name:
-        return ("rest",)
-    for key in (name, name.rstrip("0123456789#-;"), name[:2], name[:1]):
-        if key in PHONEME_VISEMES:
-            return PHONEME_VISEMES[key]
-    return ("rest",)
-
-
-def phone_stress(mnemonic: str, alphabet: str = "espeak") -> float | None:
-    """1.0 for a phone marked with primary stress, 0.5 secondary, 0.0 unstressed, None when unmarked
-    (espeak: a leading ' or , ; CMU: the digit 1, 2 or 0)."""
-    name = mnemonic.strip()
-    if alphabet == "cmu":
-        return {"1": 1.0, "2": 0.5, "0": 0.0}.get(name[-1:]) if name else None
-    if name.startswith("'"):
-        return 1.0
-    return 0.5 if name.startswith(",") else None
-
 
 PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
 PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range
@@ -202,8 +131,7 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     clip's median vowel and less when quieter (PROSODY_DB, PROSODY_GAIN); stress marks on the phones add
     STRESS_GAIN. Without either, the curves are those of the phones alone.
     """
-    if alphabet not in ALPHABETS:
-        raise FacegenError(f"unknown phone alphabet {alphabet!r}: use one of {', '.join(ALPHABETS)}")
+    check_alphabet(alphabet)
     style = style or SpeakerStyle()
     if num_frames <= 0:
         return np.zeros((0, len(LOWER_CHANNELS)), np.float32)
@@ -221,7 +149,7 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
         if start - cursor > 0.02:
             segments.append((cursor, start, "rest", 1.0))
         parts = phone_visemes(text, alphabet)
-        stress = phone_stress(text, alphabet) if parts[0] in VOWELS else None
+        stress = phone_stress(text, alphabet) if parts[0] in VOWEL_VISEMES else None
         gain = 1.0 if stress is None else 1.0 + STRESS_GAIN * (2 * stress - 1)
         step = (end - start) / len(parts)
         for k, vis in enumerate(parts):
@@ -238,7 +166,7 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
             a = int(np.clip(start * loudness_rate, 0, len(loud) - 1))
             return float(loud[a:max(a + 1, int(np.ceil(end * loudness_rate)))].mean())
 
-        levels = [level(a, b) if vis in VOWELS else np.nan for a, b, vis, _ in segments]
+        levels = [level(a, b) if vis in VOWEL_VISEMES else np.nan for a, b, vis, _ in segments]
         vowel_db = [v for v in levels if np.isfinite(v)]
         if vowel_db:
             median = float(np.median(vowel_db))
@@ -262,7 +190,7 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
         away = np.maximum(np.abs(dt) - half * (1.0 if vis == "rest" else 0.8), 0.0)
         rate = np.where(dt < 0, 1 / ahead, 1 / behind)  # before the segment: anticipation
         dom = np.where(lips, dom_lips, dom_jaw)
-        if vis in VOWELS:
+        if vis in VOWEL_VISEMES:
             dom = np.where(is_close, VOWEL_APERTURE_DOMINANCE, dom)
         d = np.exp(-away * rate)[:, None] * dom[None, :]
         num += d * target[None, :]
