@@ -36,6 +36,7 @@ from facegen.align_pieces import (
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import pronounce
+from facegen.phonetics import SIL, is_filler
 from facegen.words import Word, check_word_rate, normalize_transcript
 
 FRAME = 0.01  # pocketsphinx frame step (s)
@@ -185,10 +186,6 @@ def _decode(decoder, pcm: bytes, cmn: str | None = None) -> list[tuple[str, int,
 
 def _base(word: str) -> str:
     return re.sub(r"\(\d+\)$", "", word)
-
-
-def _is_filler(word: str) -> bool:
-    return word.startswith(("<", "[", "+"))  # <s> </s> <sil> [NOISE] +SPN+ ...
 
 
 def _clip_cmn(pcm: bytes) -> str:
@@ -378,7 +375,7 @@ def _align_piece(pcm: bytes, tokens: list[str], length: int, rest: int, cmn: str
                 decoder.activate_search("_prefix")
             else:
                 decoder.set_align_text(" ".join(keys))
-            words = [s for s in _decode(decoder, pcm, cmn) if not _is_filler(s[0])]
+            words = [s for s in _decode(decoder, pcm, cmn) if not is_filler(s[0])]
             said = [_base(w) for w, _, _ in words]
             if said == keys or (prefix and words and said == keys[:len(said)]):
                 if len(said) < offered or offered == len(tokens):
@@ -415,7 +412,7 @@ def _phones(alignment, skip: int, count: int, first: int, duration: float) -> li
     for word in alignment:
         if count == 0:
             break
-        if _is_filler(word.name):
+        if is_filler(word.name):
             continue
         if skip:
             skip -= 1
@@ -423,7 +420,7 @@ def _phones(alignment, skip: int, count: int, first: int, duration: float) -> li
         count -= 1
         phones += [(phone.name, round((first + phone.start) * FRAME, 3),
                     round(min((first + phone.start + phone.duration) * FRAME, duration), 3))
-                   for phone in word if phone.name != "SIL"]
+                   for phone in word if phone.name != SIL]
     return phones
 
 
@@ -438,4 +435,4 @@ def recognize(audio: np.ndarray, sample_rate: int) -> list[Word]:
         segments = _decode(_decoder("recognize"), pcm)
     duration = len(audio) / RATE
     return [Word(_base(w), round(first * FRAME, 3), round(min((last + 1) * FRAME, duration), 3))
-            for w, first, last in segments if not _is_filler(w)]
+            for w, first, last in segments if not is_filler(w)]

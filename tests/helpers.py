@@ -158,6 +158,7 @@ def procedural_rig():
 def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 16000) -> Animation:
     """A speech-like animation of the procedural face (random phones through the rig) with a sound of
     noise bursts (loud where the jaw opens) lasting exactly frames / fps seconds."""
+    from facegen.phonetics import ESPEAK_TO_CMU
     from facegen.synth import curves as rigs
     from facegen.synth.lexicon import LEXICON
 
@@ -165,7 +166,7 @@ def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 1
     rng = np.random.default_rng(seed)
     seconds = frames / fps
     phones, t = [], 0.1
-    names = sorted(rigs.PHONEME_VISEMES)
+    names = sorted(ESPEAK_TO_CMU)
     while t < seconds - 0.15:
         if rng.random() < 0.08:
             t += rng.uniform(0.15, 0.4)
