@@ -21,6 +21,7 @@ import numpy as np
 
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
+from facegen.phonetics import check_alphabet, is_silence, phone_visemes
 
 if TYPE_CHECKING:
     from facegen.synth.rig import Rig
@@ -32,7 +33,6 @@ CLOSED_MM = 1.0  # aperture below which the lips are closed
 STILL_MM = 1e-3  # upper-face motion below this is none (float32 rounding of the template is ~1e-7 mm)
 SPEECH_PAD = 0.1  # s, added to each side of a word or phone by speech_mask
 REGIONS = ("mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball", "lips", "upper_face")
-_SILENCE = ("_", "+", "<", "[")  # espeak pauses (_), pocketsphinx fillers (+NSN+, <sil>, [NOISE])
 
 # the targets of issue 10 (on a held-out synthesiser and on recorded human speech): key -> (low, high)
 TARGETS: dict[str, tuple[float | None, float | None]] = {
@@ -106,11 +106,6 @@ def _timing(item) -> tuple[str, float, float]:
     return str(item[0]), float(item[1]), float(item[2])
 
 
-def _is_silence(name: str) -> bool:
-    name = name.strip()
-    return not name or name.startswith(_SILENCE) or name.upper() == "SIL"
-
-
 def speech_mask(items: Sequence, num_frames: int, fps: float, pad: float = SPEECH_PAD) -> np.ndarray:
     """Boolean [num_frames]: frame k (at time k / fps) lies within `pad` seconds of a spoken word or phone.
 
@@ -123,7 +118,7 @@ def speech_mask(items: Sequence, num_frames: int, fps: float, pad: float = SPEEC
         return mask
     for item in items:
         name, start, end = _timing(item)
-        if _is_silence(name) or end < start:
+        if is_silence(name.strip()) or end < start:
             continue
         lo, hi = int(np.ceil((start - pad) * fps - 1e-9)), int(np.floor((end + pad) * fps + 1e-9))
         if hi < lo:
@@ -136,10 +131,7 @@ def bilabial_midpoints(phones: Sequence, fps: float, alphabet: str = "espeak") -
     """Frame indices (int64) of the midpoints of the p, b and m phones (the rig's PBM viseme in `alphabet`,
     "espeak" or "cmu"): round((start + end) / 2 · fps), the frame the rig closes the lips on even for a
     bilabial shorter than a frame."""
-    from facegen.synth.curves import ALPHABETS, phone_visemes
-
-    if alphabet not in ALPHABETS:
-        raise FacegenError(f"unknown phone alphabet {alphabet!r}: use one of {', '.join(ALPHABETS)}")
+    check_alphabet(alphabet)
     out = []
     for phone in phones:
         name, start, end = _timing(phone)

@@ -27,13 +27,6 @@ from facegen.runtime import run_tool, tool_path
 
 Timing = tuple[str, float, float]
 
-# The radio phone set of Flite and Festival's US voices -> CMU (ARPAbet) without stress; silences map to None.
-_SAME = ("aa", "ae", "ah", "ao", "aw", "ay", "b", "ch", "d", "dh", "eh", "er", "ey", "f", "g", "hh",
-         "ih", "iy", "jh", "k", "l", "m", "n", "ng", "ow", "oy", "p", "r", "s", "sh", "t", "th", "uh", "uw",
-         "v", "w", "y", "z", "zh")
-_RADIO_TO_CMU = {p: p.upper() for p in _SAME} | {"ax": "AH", "axr": "ER", "pau": None, "h#": None, "#": None,
-                                                 "sil": None, "ssil": None}
-
 
 @dataclass(frozen=True)
 class Voice:
@@ -69,10 +62,12 @@ class Utterance:
 
 def cmu_phone(phone: str, voice: str) -> str | None:
     """A radio-set phone as a CMU phone (upper case, no stress); None for a silence."""
-    if phone not in _RADIO_TO_CMU:
+    if is_pause(phone):
+        return None
+    if phone not in RADIO_TO_CMU:
         raise FacegenError(f"voice {voice} produced the phone {phone!r}, which is not in the CMU set: "
                            "use an English voice")
-    return _RADIO_TO_CMU[phone]
+    return RADIO_TO_CMU[phone]
 
 
 def _timings(segments: list[tuple[str, float]], voice: str) -> list[Timing]:
