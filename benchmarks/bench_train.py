@@ -36,7 +36,7 @@ import torch
 from facegen.datasets.biwi import Item, Sequence
 from facegen.model import FaceModel, ModelConfig
 from facegen.motion_basis import CoefficientLoss
-from facegen.phones import PHONES
+from facegen.phonetics import PHONES
 from facegen.train import CHECKPOINT, Batch, epoch_order, save_checkpoint, torch_settings, train_epoch
 
 BIWI_VERTICES = 23370

@@ -280,7 +280,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
     from facegen.audio import load_audio, mel_features
     from facegen.inference import BLOCK_FRAMES, decoder_states, frame_stream
     from facegen.model import one_hot
-    from facegen.phones import silence
+    from facegen.phonetics import silence
 
     samples, sr = load_audio(wav)
     mel = mel_features(samples, sr, bundle.features, bundle.mel_filters)

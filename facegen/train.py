@@ -51,7 +51,7 @@ from facegen.train_config import TrainConfig
 from facegen.train_data import Batch, PcaTargets, TrainData, load_train_data, make_batches, pca_targets
 from facegen.model import FaceModel, ModelConfig, one_hot
 from facegen.model_config import FUSIONS, MODALITIES
-from facegen.phones import PHONES
+from facegen.phonetics import PHONES
 from facegen.runtime import Say, progress_bar, say_stderr, select_device, silent, warn_stderr
 
 CHECKPOINT = "checkpoint.safetensors"

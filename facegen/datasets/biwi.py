@@ -308,7 +308,7 @@ class Dataset:
         alignment of its transcript (computed once and cached); a BadSequence with neither."""
         import json
 
-        from facegen.phones import phone_frames
+        from facegen.phonetics import phone_frames
 
         data: dict = {}
         if seq.alignment is not None and seq.alignment.suffix.lower() == ".json":
