@@ -59,13 +59,13 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     from facegen.animation import Animation
     from facegen.render import render_animation
-    from facegen.render.video import default_threads
+    from facegen.runtime import cores
 
     anim = talking_clip()
     print(
         f"bench_render: setup (imports, template) {time.perf_counter() - start:.2f} s; "
         f"{anim.num_frames} frames, {anim.num_vertices} vertices, {len(anim.faces)} triangles, "
-        f"{args.threads or default_threads()} render threads"
+        f"{args.threads or cores()} render threads"
     )
     rest = Animation(np.repeat(anim.template[None], FRAMES, 0), anim.faces, FPS, anim.template)
     cases = [("preview", None)] + ([("compare", rest)] if args.compare else [])

@@ -118,6 +118,9 @@ def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead 
                             name="facegen-align")
     sender.close()
     return AlignAhead(process, receiver)
+    if process is None:  # no fork on this platform
+        receiver.close()
+        return None
 
 
 def _child(sender, audio: str, text: str, with_phones: bool) -> None:

@@ -29,6 +29,8 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
+from facegen.runtime import threads
+
 BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
 def _model_on(bundle, device):
@@ -93,22 +95,12 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_
         return list(unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False))))
 
 
-@contextlib.contextmanager
-def _one_thread(enabled: bool) -> Iterator[None]:
+def _one_thread(enabled: bool) -> contextlib.AbstractContextManager:
     """One torch thread for the decoder states: thousands of small sequential LSTM steps gain little from
     a second thread (0.095 s vs 0.11-0.13 s for 1500 frames, idle 2-core EPYC) but lose 4-6x when its
     OpenMP threads sleep between steps (OMP_WAIT_POLICY=PASSIVE) or the cores are busy. The output
     layer, where the work is, runs on numpy's BLAS threads, which this does not touch."""
-    import torch
-
-    threads = torch.get_num_threads()
-    if enabled and threads > 1:
-        torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        if torch.get_num_threads() != threads:
-            torch.set_num_threads(threads)
+    return threads(1 if enabled else None, ("torch",))
 
 
 class FrameStream:

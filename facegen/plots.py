@@ -38,7 +38,7 @@ from facegen.datasets.biwi import Item
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
-from facegen.runtime import progress_bar, say_stderr, silent
+from facegen.runtime import progress_bar, say_stderr, silent, threads
 
 if TYPE_CHECKING:
     from facegen.evaluate import Run
@@ -277,13 +277,12 @@ def correlation_summary(maps: dict[str, np.ndarray], dims: dict[str, int], lips:
 def tsne(features: np.ndarray, seed: int = 0) -> np.ndarray:
     """2-D t-SNE (scikit-learn, PCA initialisation) of features [N, D]; perplexity 30 or less for small N."""
     from sklearn.manifold import TSNE
-    from threadpoolctl import threadpool_limits
 
     n = len(features)
     perplexity = float(min(30.0, max(2.0, (n - 1) / 3)))
     # one thread: scikit-learn's OpenMP Barnes-Hut loop crawls when its threads compete for the cores
     # (400 points: 3 s on one thread, 15 s on two on a busy 2-core machine)
-    with threadpool_limits(1):
+    with threads(1, ("blas", "openmp")):
         return TSNE(2, perplexity=perplexity, init="pca", random_state=seed).fit_transform(
             np.asarray(features, np.float64))
 

@@ -9,11 +9,14 @@ home of tqdm) draw only on a terminal: in a log they are one summary line at mos
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import json
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from pathlib import Path
 from typing import Self
 
 from facegen.errors import FacegenError

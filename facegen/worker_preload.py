@@ -1,6 +1,7 @@
-"""Importing this module creates the forced aligner's pocketsphinx decoders (`align.warm`). The local batch
-engine's forkserver imports it (engines.PRELOAD), so that every worker is forked with them instead of building
-its own: a module, because a forkserver's preload can only import."""
+"""The batch workers' preload: the local batch engine's forkserver imports this module once (engines.PRELOAD,
+runtime.process_pool's `preload`) before it forks the workers, so that every worker starts with the forced
+aligner's pocketsphinx decoders built (`align.warm()`) instead of building its own. Importing it is its one
+effect — a forkserver's preload can only import modules — and nothing else imports it."""
 
 from facegen import align
 

@@ -10,7 +10,6 @@ an unwritable cache folder only costs the rebuild.
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from facegen.arkit.names import ARKIT_NAMES
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.mesh import Mesh
+from facegen.runtime import cache_dir
 
 # the code the shapes are made by: part of the cache key, so a changed deformation is never read from the cache
 SOURCES = (Path(__file__).with_name("deformers.py"), Path(__file__).parents[1] / "synth" / "rig.py")
@@ -56,8 +56,8 @@ def mesh_digest(mesh: Mesh) -> str:
 
 
 def cache_folder() -> Path:
-    """Where built shapes are stored: $XDG_CACHE_HOME/facegen/arkit (default ~/.cache/facegen/arkit)."""
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "facegen" / "arkit"
+    """Where built shapes are stored: runtime.cache_dir("arkit") ($XDG_CACHE_HOME/facegen/arkit)."""
+    return cache_dir("arkit")
 
 
 def _read(path: Path, num_vertices: int) -> Shapes | None:

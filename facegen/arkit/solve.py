@@ -23,11 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import dct, idct
-from threadpoolctl import threadpool_limits
 
 from facegen.animation import Animation, check_animation
 from facegen.arkit.shapes import Shapes, arkit_shapes
 from facegen.errors import FacegenError
+from facegen.runtime import threads
 
 DEFAULT_SMOOTHNESS = 0.01  # mm^2 per vertex that a full-range weight step between frames costs
 RIDGE = 1e-5  # x each shape's own curvature: breaks exact ties only (jawLeft + jawRight cancel on the face)
@@ -68,7 +68,7 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *, shapes
     scale = 1.0 / (anim.num_vertices * shapes.mm**2)  # mesh units^2 summed over vertices -> mm^2 per vertex
     rest = np.asarray(anim.template, np.float32).reshape(-1)
     rhs = np.empty((anim.num_frames, len(basis)), np.float64)
-    with threadpool_limits(1, user_api="blas"):  # a busy machine: threads only add waiting
+    with threads(1, ("blas",)):  # a busy machine: threads only add waiting
         gram = (basis @ basis.T).astype(np.float64) * scale
         keep = anim.num_frames * anim.num_vertices * 12 <= KEEP_BYTES  # else the errors' pass reads them again
         kept = []

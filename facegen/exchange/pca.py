@@ -20,10 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from facegen.animation import Animation
 from facegen.errors import FacegenError
+from facegen.runtime import threads
 
 DEFAULT_TOLERANCE = 1e-3  # largest vertex error, as a fraction of the face's bounding-box diagonal
 MAX_FRAME_TARGETS = 300  # `k="all"` (one target per frame) is refused for longer clips
@@ -114,7 +114,7 @@ def morph_basis(
     flat = frames.reshape(T, -1)
     shift = template.reshape(-1)
     rng = np.random.default_rng(seed)
-    with threadpool_limits(1, user_api="blas"):  # many small products: threads only add waiting
+    with threads(1, ("blas",)):  # many small products: threads only add waiting
         if k is not None:
             k = min(int(k), T)
             temporal, coeffs = _principal_components(flat, shift, min(T, k + _OVERSAMPLE), rng)

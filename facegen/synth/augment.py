@@ -176,11 +176,10 @@ def band_limit(audio: np.ndarray, sr: int, low: float | None, high: float | None
 
 
 def _ffmpeg(args: list[str], what: str) -> None:
-    import imageio_ffmpeg
+    from facegen.runtime import run_tool
 
-    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-nostdin", "-v", "error", *args]
     try:
-        proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=120, errors="replace")
+        proc = run_tool("ffmpeg", ["-y", "-nostdin", "-v", "error", *args], text=True, timeout=120)
     except subprocess.TimeoutExpired as exc:
         raise FacegenError(f"ffmpeg did not finish {what} within 120 s") from exc
     if proc.returncode != 0:

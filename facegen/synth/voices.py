@@ -127,8 +127,6 @@ def _run(cmd: list[str], what: str, timeout: float, cwd: Path | None = None) -> 
         proc = run_tool(cmd[0], cmd[1:], text=True, timeout=timeout, cwd=cwd)
     except subprocess.TimeoutExpired as exc:
         raise FacegenError(f"{what} did not finish within {timeout:.0f} s: try a shorter text") from exc
-    except OSError as exc:
-        raise FacegenError(f"cannot run {cmd[0]} for {what} ({exc}): reinstall it") from exc
     if proc.returncode != 0:
         lines = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
         detail = next((ln for ln in lines if "ERROR" in ln), lines[-1] if lines else "no message")

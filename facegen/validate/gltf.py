@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -34,7 +33,8 @@ from facegen.errors import FacegenError
 from facegen.exchange import gltf as gltf_format
 from facegen.exchange import mp3, read_animation
 from facegen.exchange.wav import sidecar_path
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
+from facegen.runtime import run_tool, tool_path
 from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
 from facegen.validate.rig import check_rig
@@ -55,16 +55,16 @@ def validator_version() -> str:
 def run_gltf_validator(path: str | os.PathLike, *, script: str | os.PathLike | None = None,
                        timeout: float = 300.0) -> tuple[dict | None, str]:
     """(the validator's JSON report, "") or (None, why it could not run and how to fix that)."""
-    node = shutil.which("node")
-    if node is None:
-        return None, f"Node.js is not installed (no `node` on PATH): install Node.js >= 18, then {INSTALL_HINT}"
     script = Path(script) if script is not None else SCRIPT
-    if not script.is_file():
-        return None, f"the validator script {script} is missing: reinstall facegen"
+    install = f"install Node.js >= 18, then {INSTALL_HINT}"
     try:
-        done = subprocess.run([node, str(script), str(path), "200"], capture_output=True, text=True,
-                              timeout=timeout, check=False)
-    except (OSError, subprocess.TimeoutExpired) as exc:
+        tool_path("node", install)
+        if not script.is_file():
+            return None, f"the validator script {script} is missing: reinstall facegen"
+        done = run_tool("node", [script, path, "200"], text=True, timeout=timeout, install=install)
+    except FacegenError as exc:  # Node.js is missing
+        return None, str(exc)
+    except subprocess.TimeoutExpired as exc:
         return None, f"could not run the glTF-Validator ({exc})"
     lines = [line for line in done.stdout.splitlines() if line.strip()]
     try:
