@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 def animation(args):
     if args.npy:
         from facegen.exchange import read_animation
-        from facegen.mesh import read_mesh
+        from facegen.face.mesh import read_mesh
 
         anim = read_animation(args.npy, template=read_mesh(args.template), fps=args.fps)
         if anim.audio is None:

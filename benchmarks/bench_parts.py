@@ -20,8 +20,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args(argv)
 
-    from facegen.synth.face import load_template
-    from facegen.synth.rig import Rig
+    from facegen.face.template import load_template
+    from facegen.face.rig import Rig
     from facegen.text import frame_features, load_text_backend
 
     rig = Rig(load_template())

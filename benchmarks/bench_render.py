@@ -25,7 +25,7 @@ FPS, FRAMES, RATE = 25.0, 125, 16000
 def talking_clip():
     """The BIWI template with its lip region opening and closing at 3 Hz, and a matching tone."""
     from facegen.animation import Animation
-    from facegen.mesh import read_mesh, read_region
+    from facegen.face.mesh import read_mesh, read_region
 
     mesh = read_mesh(BIWI_DIR / "BIWI.ply")
     lips = read_region(BIWI_DIR / "lve.txt")

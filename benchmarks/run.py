@@ -153,11 +153,11 @@ def model_path(folder: Path) -> tuple[Path, str]:
     from facegen.bundle import save_bundle
 
     if BIWI.is_file():
-        from facegen.mesh import read_mesh
+        from facegen.face.mesh import read_mesh
 
         template, where = read_mesh(BIWI), "BIWI template"
     else:
-        from facegen.synth.face import make_face
+        from facegen.face.procedural import make_face
 
         template, where = make_face(), "procedural face"
     bundle = make_bundle(template, None, small=False, speakers=("F2", "F3", "F4", "M3", "M4", "M5"))

@@ -18,8 +18,8 @@ from PIL import Image, ImageDraw, ImageFont
 from facegen.arkit.shapes import arkit_shapes
 from facegen.atomic import atomic_path
 from facegen.render.raster import BACKGROUND, Renderer, face_colors
-from facegen.synth.face import load_template
-from facegen.synth.rig import Rig
+from facegen.face.template import load_template
+from facegen.face.rig import Rig
 
 PER_SHEET, COLUMNS = 13, 7
 IRIS, PUPIL = (0.30, 0.42, 0.52), (0.05, 0.05, 0.06)  # sRGB

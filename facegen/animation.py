@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 
 DEFAULT_FPS = 25.0  # the frame rate of a file that states none (BIWI's)
 

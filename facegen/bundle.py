@@ -23,7 +23,7 @@ import numpy as np
 
 from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 
 if TYPE_CHECKING:  # torch is imported by what loads or saves weights: `facegen info` reads metadata without it
     import torch

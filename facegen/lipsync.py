@@ -1,7 +1,7 @@
 """Lip-sync metrics: how well a face animation follows speech, measured against a reference animation.
 
-Everything is measured on the procedural face's regions (facegen.synth.face) in physical units: 1 cm is
-the distance between the eyeball centres / 6.3, as the rig (facegen.synth.rig) measures it.
+Everything is measured on the procedural face's regions (facegen.face.procedural) in physical units: 1 cm is
+the distance between the eyeball centres / 6.3, as the rig (facegen.face.rig) measures it.
 
 * lip aperture: the gap between the upper and lower mouth margin over the middle third of the mouth;
 * `lipsync_metrics`: aperture correlation (lag 0 and best lag), aperture ratio, crossed lips, bilabial
@@ -20,11 +20,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
+from facegen.face.regions import LIPS, LIPSYNC_REGIONS, UPPER_FACE
 from facegen.phonetics import check_alphabet, is_silence, phone_visemes
 
 if TYPE_CHECKING:
-    from facegen.synth.rig import Rig
+    from facegen.face.rig import Rig
 
 MAX_LAG = 3  # frames searched either way for the best-lag aperture correlation
 OPEN_MM = 2.0  # reference aperture above which a frame counts as open (the face's rest gap is ~1 mm)
@@ -32,7 +33,6 @@ CROSSED_MM = -0.5  # aperture below which the lips are crossed
 CLOSED_MM = 1.0  # aperture below which the lips are closed
 STILL_MM = 1e-3  # upper-face motion below this is none (float32 rounding of the template is ~1e-7 mm)
 SPEECH_PAD = 0.1  # s, added to each side of a word or phone by speech_mask
-REGIONS = ("mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball", "lips", "upper_face")
 
 # the targets of issue 10 (on a held-out synthesiser and on recorded human speech): key -> (low, high)
 TARGETS: dict[str, tuple[float | None, float | None]] = {
@@ -59,26 +59,27 @@ class FaceGeometry:
 
     @classmethod
     def of(cls, mesh: Mesh | FaceGeometry) -> FaceGeometry:
-        """The geometry of `mesh` (a FaceGeometry is returned as is); refuses a face without REGIONS."""
+        """The geometry of `mesh` (a FaceGeometry is returned as is); refuses a face without
+        LIPSYNC_REGIONS."""
         if isinstance(mesh, FaceGeometry):
             return mesh
-        from facegen.synth.rig import EYE_SPACING_CM, _fit_centre
+        from facegen.face.rig import face_scale
 
-        missing = [r for r in REGIONS if r not in mesh.regions]
+        missing = [r for r in LIPSYNC_REGIONS if r not in mesh.regions]
         if missing:
-            raise FacegenError(f"the mesh lacks the lip-sync regions {', '.join(missing)}: use the procedural "
-                               "face (templates/face.ply, facegen.synth.face) or a bundle made on it")
-        reg = {k: np.asarray(mesh.regions[k], np.int64) for k in REGIONS}
+            raise FacegenError(f"the mesh lacks the lip-sync regions {', '.join(missing)}: use the "
+                               "procedural face (facegen.face.template.load_template) or a bundle made on it")
+        reg = {k: np.asarray(mesh.regions[k], np.int64) for k in LIPSYNC_REGIONS}
         mu, ml = reg["mouth_upper_margin"], reg["mouth_lower_margin"]
         if len(mu) != len(ml) or len(mu) < 3:
             raise FacegenError(f"the mouth margins must pair up (at least 3 each), got {len(mu)} upper and "
                                f"{len(ml)} lower vertices")
         t = np.asarray(mesh.vertices, np.float64)
-        spacing = np.linalg.norm(_fit_centre(t[reg["left_eyeball"]]) - _fit_centre(t[reg["right_eyeball"]]))
+        _, cm = face_scale(t, reg)
         third = len(mu) // 3
         middle = slice(third, len(mu) - third)
-        return cls(template=t, upper=mu[middle], lower=ml[middle], cm=float(spacing) / EYE_SPACING_CM,
-                   lips=reg["lips"], upper_face=reg["upper_face"])
+        return cls(template=t, upper=mu[middle], lower=ml[middle], cm=cm,
+                   lips=reg[LIPS], upper_face=reg[UPPER_FACE])
 
 
 def _frames(vertices: np.ndarray, geo: FaceGeometry, what: str) -> np.ndarray:
@@ -304,12 +305,12 @@ def rig_reference(phones: Sequence, words: Sequence, num_frames: int, fps: float
     """The reference animation [num_frames, V, 3] (float32) for a recording with these phone and word
     timings (e.g. from forced alignment): facegen's rig with the neutral speaker style and no blinks.
 
-    `mesh`: the face (a Mesh, or a facegen.synth.rig.Rig built on it to reuse across calls; default: the
-    procedural face, templates/face.ply, rigged once). `alphabet` ("espeak" mnemonics or "cmu" phones)
-    and `loudness` (the recording's facegen.synth.rig.loudness_envelope: prosody) go to the rig's
+    `mesh`: the face (a Mesh, or a facegen.face.rig.Rig built on it to reuse across calls; default: the
+    committed neutral face, rigged once). `alphabet` ("espeak" mnemonics or "cmu" phones)
+    and `loudness` (the recording's facegen.synth.curves.loudness_envelope: prosody) go to the rig's
     motion_curves; emotional words move the upper face as in the synthetic corpus."""
+    from facegen.face.rig import CHANNELS, Rig
     from facegen.synth.curves import motion_curves
-    from facegen.synth.rig import CHANNELS, Rig
 
     rig = _template_rig() if mesh is None else mesh if isinstance(mesh, Rig) else Rig(mesh)
     curves = motion_curves(phones, words, int(num_frames), fps, rng=np.random.default_rng(0), alphabet=alphabet,
@@ -320,9 +321,9 @@ def rig_reference(phones: Sequence, words: Sequence, num_frames: int, fps: float
 
 @functools.cache
 def _template_rig() -> Rig:
-    """The rig on templates/face.ply, built once."""
-    from facegen.synth.face import load_template
-    from facegen.synth.rig import Rig
+    """The rig on the committed neutral face (facegen/face/templates/face.ply), built once."""
+    from facegen.face.rig import Rig
+    from facegen.face.template import load_template
 
     return Rig(load_template())
 

@@ -492,7 +492,7 @@ def _make_bundle(model: FaceModel, features, filters: np.ndarray, backend, speak
                  provenance: dict):
     from facegen import __version__
     from facegen.bundle import Bundle
-    from facegen.mesh import Mesh
+    from facegen.face.mesh import Mesh
 
     template = Mesh(mesh.vertices.astype(np.float32), mesh.faces, dict(mesh.regions))
     return Bundle(model=model, features=features, mel_filters=filters,

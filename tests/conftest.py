@@ -19,7 +19,7 @@ def biwi_template():
     """The real BIWI template mesh with its lip and upper-face regions (skips when absent)."""
     if not (BIWI_DIR / "BIWI.ply").is_file():
         pytest.skip("../shared/biwi is not present")
-    from facegen.mesh import read_mesh, read_region
+    from facegen.face.mesh import read_mesh, read_region
 
     mesh = read_mesh(BIWI_DIR / "BIWI.ply")
     mesh.regions = {"lips": read_region(BIWI_DIR / "lve.txt"), "upper_face": read_region(BIWI_DIR / "fdd.txt")}

@@ -20,7 +20,7 @@ from facegen.audio import FeatureConfig, mel_filters
 from facegen.bundle import Bundle, save_bundle
 from facegen.datasets.biwi import DatasetWriter
 from facegen.datasets.splits import Splits
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 from facegen.model import FaceModel, ModelConfig
 from facegen.words import Word
 
@@ -148,8 +148,8 @@ def make_dataset(root: Path, *, subjects=SUBJECTS, sentences=range(1, 8), with_a
 
 @functools.cache
 def procedural_rig():
-    from facegen.synth.face import load_template
-    from facegen.synth.rig import Rig
+    from facegen.face.template import load_template
+    from facegen.face.rig import Rig
 
     mesh = load_template()
     return mesh, Rig(mesh)
@@ -301,7 +301,7 @@ def train_toy(toy, out, **kw):
 
 def rig_weights(frames: int, **channels) -> np.ndarray:
     """Rig channel weights [frames, len(CHANNELS)]: the named channels set (a number or a [frames] array), the rest 0."""
-    from facegen.synth.rig import CHANNELS
+    from facegen.face.rig import CHANNELS
 
     w = np.zeros((frames, len(CHANNELS)), np.float32)
     for name, value in channels.items():

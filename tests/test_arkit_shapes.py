@@ -9,9 +9,10 @@ from scipy.spatial import cKDTree
 from facegen.arkit import shapes as arkit
 from facegen.arkit.names import ARKIT_NAMES
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
-from facegen.synth.face import make_face, speaker_face
-from facegen.synth.rig import CHANNELS, RIG_REGIONS, Rig
+from facegen.face.mesh import Mesh
+from facegen.face.procedural import make_face, speaker_face
+from facegen.face.regions import ARKIT_REGIONS, RIG_REGIONS
+from facegen.face.rig import CHANNELS, Rig
 
 
 @pytest.fixture(scope="module")
@@ -176,7 +177,7 @@ def test_tongue_out_on_a_face_without_tongue_pushes_the_lower_lip_not_the_jaw(sh
 
 
 def test_missing_regions_are_named(face):
-    assert set(RIG_REGIONS) < set(arkit.REGIONS)  # checked before the (lazily imported) rig is built
+    assert set(RIG_REGIONS) < set(ARKIT_REGIONS)  # checked before the (lazily imported) rig is built
     regions = {k: v for k, v in face.regions.items() if k not in ("nose", "jaw")}
     with pytest.raises(FacegenError, match="jaw, nose") as err:
         arkit.arkit_shapes(Mesh(face.vertices, face.faces, regions))

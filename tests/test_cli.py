@@ -126,7 +126,7 @@ def _bad_inputs(d: Path) -> dict:
     (b / "late.json").write_text(json.dumps({"words": [{"word": "hello", "start": 0.1, "end": 99.0}]}))
     data = (d / "model.safetensors").read_bytes()
     (b / "trunc.safetensors").write_bytes(data[: len(data) // 3])
-    from facegen.mesh import Mesh, read_mesh, write_mesh
+    from facegen.face.mesh import Mesh, read_mesh, write_mesh
 
     biwi = read_mesh(Path(__file__).resolve().parents[2] / "shared" / "biwi" / "BIWI.ply")
     write_mesh(Mesh(biwi.vertices[:-10], biwi.faces[biwi.faces.max(1) < 23360]), b / "small.ply")

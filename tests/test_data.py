@@ -21,7 +21,7 @@ from facegen.datasets.raw import import_biwi, read_transcripts, read_vl, write_v
 from facegen.datasets.splits import Splits, parse_numbers
 from facegen.datasets.templates import read_templates_pkl, write_templates_pkl
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 
 FPS = 25
 SR = 16000

@@ -108,7 +108,7 @@ def bundle_path(tmp_path_factory):
 def test_evaluate_test_a_uses_each_sequence_own_speaker(toy, bundle_path):
     from facegen.bundle import load_bundle
     from facegen.datasets.biwi import Dataset
-    from facegen.mesh import read_region
+    from facegen.face.mesh import read_region
 
     result = evaluate(bundle_path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
     assert result["split"] == "test-a" and result["sequences"] == 4
@@ -134,7 +134,7 @@ def test_evaluate_test_a_uses_each_sequence_own_speaker(toy, bundle_path):
 def test_evaluate_test_b_averages_over_every_training_speaker(toy, bundle_path):
     from facegen.bundle import load_bundle
     from facegen.datasets.biwi import Dataset
-    from facegen.mesh import read_region
+    from facegen.face.mesh import read_region
 
     result = evaluate(bundle_path, toy, "test-b", splits=TOY_SPLITS, quiet=True, warn=None)
     assert [r["name"] for r in result["per_sequence"]] == ["F1_e06", "F1_e07"]

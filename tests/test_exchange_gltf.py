@@ -20,7 +20,7 @@ from helpers import rig_clip
 from facegen.animation import Animation
 from facegen.errors import FacegenError
 from facegen.exchange import gltf, mp3, pca, read_animation, surface, write_animation
-from facegen.mesh import vertex_normals
+from facegen.face.mesh import vertex_normals
 
 IN_CI = os.environ.get("CI", "").lower() == "true"
 
@@ -291,7 +291,7 @@ def test_bad_input_writes_nothing(clip, tmp_path):
 
 def test_validate_glb_passes_khronos_and_every_check(clip, tmp_path):
     _node_ready()
-    from facegen.mesh import Mesh
+    from facegen.face.mesh import Mesh
     from facegen.validate import validate
 
     out = tmp_path / "v.glb"

@@ -21,7 +21,7 @@ from facegen.errors import FacegenError
 from facegen.exchange import extensions, format_of, read_animation, write_animation
 from facegen.exchange.formats import COMMON_OPTIONS, FORMATS
 from facegen.exchange.usd import DEFAULT_METERS_PER_UNIT
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 
 
 def stage_points(path: Path) -> tuple[Usd.Stage, UsdGeom.Mesh, list[float], np.ndarray]:

@@ -17,7 +17,7 @@ from facegen.lipsync import (
     speech_mask,
     upper_face_response,
 )
-from facegen.synth.rig import JAW_MAX_ANGLE, Rig
+from facegen.face.rig import JAW_MAX_ANGLE, Rig
 from facegen.words import Word
 
 FPS = 25.0
@@ -29,7 +29,7 @@ T = 35  # 1.4 s
 
 @pytest.fixture(scope="module")
 def face():
-    from facegen.synth.face import load_template
+    from facegen.face.template import load_template
 
     return load_template()
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh, check_topology, read_mesh, read_region, write_mesh, write_region
+from facegen.face.mesh import Mesh, check_topology, read_mesh, read_region, write_mesh, write_region
 
 
 @pytest.mark.parametrize("ext", ["ply", "obj"])

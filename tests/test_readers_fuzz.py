@@ -39,7 +39,7 @@ def _read(tmp_path: Path, name: str, data: bytes, reader) -> None:
 
 def _animation(path: Path):
     from facegen.exchange import read_animation
-    from facegen.mesh import Mesh
+    from facegen.face.mesh import Mesh
 
     template = Mesh(np.zeros((4, 3), np.float32), np.array([[0, 1, 2], [1, 2, 3]], np.int32))
     return read_animation(path, template=template)
@@ -106,7 +106,7 @@ def test_templates_pkl_on_arbitrary_bytes(tmp_path_factory, data):
 
 @pytest.mark.parametrize("suffix", [".ply", ".obj"])
 def test_mesh_reader_on_arbitrary_bytes(suffix, tmp_path):
-    from facegen.mesh import read_mesh
+    from facegen.face.mesh import read_mesh
 
     prefix = b"ply\nformat ascii 1.0\n" if suffix == ".ply" else b"v 0 0 0\n"
 

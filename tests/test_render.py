@@ -13,7 +13,7 @@ import pytest
 from facegen.animation import Animation
 from facegen.errors import FacegenError
 from facegen.exchange import write_animation
-from facegen.mesh import Mesh, write_mesh
+from facegen.face.mesh import Mesh, write_mesh
 from facegen.render import render, render_animation, render_still
 from facegen.render.overlay import TEXT, compare_overlay
 from facegen.render.raster import BACKGROUND, Renderer, face_colors, frame_cameras, heat_colors

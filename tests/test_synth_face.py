@@ -1,4 +1,5 @@
-"""The procedural face: vertex count, determinism, normalisation, regions, slits, speakers, templates."""
+"""The procedural face (facegen.face): vertex count, determinism, normalisation, regions, slits, speakers,
+the committed templates (package data)."""
 
 from __future__ import annotations
 
@@ -9,16 +10,12 @@ import numpy as np
 import pytest
 
 from facegen.errors import FacegenError
-from facegen.mesh import read_mesh, surface_area
-from facegen.synth import face as F
-from facegen.synth.face import (
-    NUM_VERTICES,
-    load_template,
-    make_face,
-    speaker_face,
-    speaker_params,
-    write_templates,
-)
+from facegen.face import procedural as F
+from facegen.face.anatomy import speaker_params
+from facegen.face.mesh import read_mesh, surface_area
+from facegen.face.procedural import NUM_VERTICES, make_face, speaker_face
+from facegen.face.regions import FACE_REGIONS, RIG_REGIONS, file_stem, region_name
+from facegen.face.template import TEMPLATES, load_template, write_templates
 
 REPO = Path(__file__).resolve().parents[1]
 BIWI = REPO.parent / "shared" / "biwi" / "BIWI.ply"
@@ -49,7 +46,8 @@ def test_exact_vertex_count_and_valid_triangles(face):
 
 def test_deterministic(face):
     again = make_face()
-    assert hashlib.sha256(face.vertices.tobytes()).hexdigest() == hashlib.sha256(again.vertices.tobytes()).hexdigest()
+    digest = [hashlib.sha256(f.vertices.tobytes()).hexdigest() for f in (face, again)]
+    assert digest[0] == digest[1]
     assert np.array_equal(face.faces, again.faces)
 
 
@@ -110,7 +108,8 @@ def test_regions(face):
     assert not s["lips"] & s["upper_face"]
     assert not s["upper_lids"] & s["lower_lids"]
     assert not s["brows"] & s["upper_lids"]
-    assert s["brows"] <= s["upper_face"] and s["upper_lids"] <= s["upper_face"] and s["lower_lids"] <= s["upper_face"]
+    assert s["brows"] <= s["upper_face"] and s["upper_lids"] <= s["upper_face"]
+    assert s["lower_lids"] <= s["upper_face"]
     assert not (s["left_eyeball"] | s["right_eyeball"] | s["mouth_cavity"]) & (s["lips"] | s["upper_face"])
     # the jaw carries the lower lip, not the upper lip
     assert s["mouth_lower_margin"] <= s["jaw"] and not s["mouth_upper_margin"] & s["jaw"]
@@ -165,15 +164,23 @@ def test_speaker_index_must_not_be_negative():
         speaker_face(-1)
 
 
+def test_region_names_are_those_of_the_face(face):
+    assert sorted(face.regions) == list(FACE_REGIONS)
+    assert set(RIG_REGIONS) < set(FACE_REGIONS)
+    assert [file_stem("lips"), file_stem("upper_face"), file_stem("jaw")] == ["lve", "fdd", "jaw"]
+    assert [region_name("lve"), region_name("fdd"), region_name("jaw")] == ["lips", "upper_face", "jaw"]
+
+
 def test_committed_templates_match_the_code(face):
-    committed = load_template(REPO / "templates")
+    assert TEMPLATES == REPO / "facegen" / "face" / "templates"  # inside the package: shipped as package data
+    committed = load_template()
     assert committed.vertices.shape == face.vertices.shape
     assert np.allclose(committed.vertices, face.vertices, atol=1e-6)
     assert np.array_equal(committed.faces, face.faces)
     assert set(committed.regions) == set(face.regions)
     for name in face.regions:
         assert np.array_equal(committed.regions[name], face.regions[name]), name
-    assert (REPO / "templates" / "face.ply").stat().st_size < 1_000_000
+    assert (TEMPLATES / "face.ply").stat().st_size < 1_000_000
 
 
 def test_write_templates_round_trip(tmp_path, face):
@@ -184,5 +191,5 @@ def test_write_templates_round_trip(tmp_path, face):
     back = load_template(tmp_path)
     assert np.array_equal(back.vertices, face.vertices)
     assert np.array_equal(back.regions["lips"], face.regions["lips"])
-    assert np.array_equal(back.regions["mouth_upper_margin"], face.regions["mouth_upper_margin"])  # order kept
+    assert np.array_equal(back.regions["mouth_upper_margin"], face.regions["mouth_upper_margin"])  # ordered
     assert not list(tmp_path.glob(".*"))  # no temporary files left behind

@@ -12,7 +12,7 @@ from helpers import FPS, SR, make_animation
 from pxr import Sdf, Vt
 
 from facegen.exchange import write_animation
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 from facegen.validate import validate
 
 FRAMES = 50

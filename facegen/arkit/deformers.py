@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facegen.synth.rig import CHANNELS, Rig, falloff, rotate_x
+from facegen.face.rig import CHANNELS, Rig, falloff, rotate_x
 
 SIDE_BLEND_CM = 1.0  # the Left/Right weights cross over between -1 cm and +1 cm of the midline
 LOOK_SIDE, LOOK_UP, LOOK_DOWN = 0.52, 0.42, 0.45  # eye rotation (rad) at eyeLookIn/Out, Up, Down = 1

@@ -1,6 +1,6 @@
 """ARKit's 52 blend shapes as offsets of facegen's procedural face: `arkit_shapes(mesh) -> Shapes`, cached.
 
-The deformations themselves are in facegen.arkit.deformers (on facegen.synth.rig's Rig). Building them takes
+The deformations themselves are in facegen.arkit.deformers (on facegen.face.rig's Rig). Building them takes
 1.2-1.6 s on the 23,370-vertex face, so the result is memoised in the process and stored on disk
 (safetensors under $XDG_CACHE_HOME/facegen/arkit, default ~/.cache), keyed by a digest of the mesh's
 vertices, faces and regions and of the deformers' source code; a damaged or foreign cache file is rebuilt,
@@ -18,14 +18,13 @@ import numpy as np
 from facegen.arkit.names import ARKIT_NAMES
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
+from facegen.face.regions import ARKIT_REGIONS
 from facegen.runtime import cache_dir
 
-# the code the shapes are made by: part of the cache key, so a changed deformation is never read from the cache
-SOURCES = (Path(__file__).with_name("deformers.py"), Path(__file__).parents[1] / "synth" / "rig.py")
-REGIONS = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
-           "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin", "right_lower_lid_margin",
-           "brows", "forehead", "cheeks", "nose")  # synth.rig.RIG_REGIONS and the nose (noseSneer)
+# the code the shapes are made by: part of the cache key (the files' bytes, not their paths), so a changed
+# deformation is never read from the cache
+SOURCES = (Path(__file__).with_name("deformers.py"), Path(__file__).parents[1] / "face" / "rig.py")
 _MEMO: dict[str, Shapes] = {}
 _MEMO_SIZE = 4
 
@@ -96,16 +95,17 @@ def _frozen(offsets: np.ndarray, mm: float) -> Shapes:
 
 def check_regions(mesh: Mesh) -> None:
     """FacegenError naming the regions the shapes need that `mesh` lacks."""
-    missing = [r for r in REGIONS if r not in mesh.regions]
+    missing = [r for r in ARKIT_REGIONS if r not in mesh.regions]
     if missing:
-        raise FacegenError(f"the face lacks the regions {', '.join(missing)} that the ARKit shapes are built on: "
-                           "use facegen's procedural face (or a mesh of its topology with its region files)")
+        raise FacegenError(f"the face lacks the regions {', '.join(missing)} that the ARKit shapes are "
+                           "built on: use facegen's procedural face (or a mesh of its topology with its "
+                           "region files)")
 
 
 def build_shapes(mesh: Mesh) -> Shapes:
-    """The 52 shapes of `mesh`, built now (no cache): a face from facegen.synth.face with the rig's regions."""
+    """The 52 shapes of `mesh`, built now (no cache): a face from facegen.face.procedural (its regions)."""
     from facegen.arkit.deformers import shape_offsets
-    from facegen.synth.rig import Rig
+    from facegen.face.rig import Rig
 
     check_regions(mesh)
     rig = Rig(mesh)

@@ -6,7 +6,7 @@ Layout of a dataset folder ROOT (names as the community uses them)::
     ROOT/wav/{subj}_e{NN}.wav             speech
     ROOT/vertices_npy/{subj}_e{NN}.npy    motion, [T, 3V] at 25 fps (float32 or float64; [T, V, 3] accepted)
     ROOT/curves/{subj}_e{NN}.npy          or, compactly, the rig curves of the motion [T, C] (facegen's
-                                          synthetic corpora): posed on the fly with facegen.synth.rig on the
+                                          synthetic corpora): posed on the fly with facegen.face.rig on the
                                           subject's template and the regions of BIWI.ply
     ROOT/templates.pkl                    {subj: [V, 3]} neutral faces (read with a restricted unpickler)
     ROOT/templates/{subj}.ply | .npy      the same, one file per subject (these win over templates.pkl)
@@ -54,10 +54,10 @@ from facegen.datasets.cache import (
 from facegen.datasets.splits import Splits
 from facegen.datasets.templates import as_vertices, read_templates_pkl, write_templates_pkl
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh, read_mesh, read_region, write_mesh, write_region
+from facegen.face.mesh import Mesh, read_mesh, read_region, write_mesh, write_region
+from facegen.face.regions import COMMUNITY_FILES, file_stem, region_name
 from facegen.runtime import Say, progress_bar, silent, warn_stderr
 
-REGION_FILES = {"lve": "lips", "fdd": "upper_face"}  # community file stem → region name in bundles
 ALIGNMENT_SUFFIXES = (".json", ".textgrid", ".csv")
 LENGTH_RATIO = 0.8  # audio and motion shorter than this fraction of each other: the sequence is corrupt
 
@@ -170,8 +170,8 @@ class Dataset:
         folder = self.root / "regions"
         if folder.is_dir():
             for path in sorted(folder.glob("*.txt")):
-                name = REGION_FILES.get(path.stem, path.stem)
-                if path.stem in REGION_FILES or name not in out:
+                name = region_name(path.stem)
+                if path.stem in COMMUNITY_FILES or name not in out:
                     out[name] = read_region(path)
         return out
 
@@ -270,7 +270,7 @@ class Dataset:
         return int(shape[0])
 
     def _curve_frames(self, seq: Sequence) -> int:
-        from facegen.synth.rig import CHANNELS
+        from facegen.face.rig import CHANNELS
 
         try:
             arr = np.load(seq.curves, allow_pickle=False)
@@ -283,7 +283,7 @@ class Dataset:
     def pose(self, subject: str) -> Callable[[np.ndarray], np.ndarray]:
         """Rig curves -> vertices on `subject`'s face (the rig built once per subject)."""
         if subject not in self._rigs:
-            from facegen.synth.rig import Rig
+            from facegen.face.rig import Rig
 
             mesh = self.mesh
             self._rigs[subject] = Rig(Mesh(self.templates[subject], mesh.faces, mesh.regions)).pose
@@ -422,9 +422,8 @@ class DatasetWriter:
 
     def write_regions(self, regions: dict[str, np.ndarray]) -> None:
         """regions/<file>.txt per region (lips → lve.txt, upper_face → fdd.txt, others by name)."""
-        names = {v: k for k, v in REGION_FILES.items()}
         for name, idx in regions.items():
-            with atomic_path(self.root / "regions" / f"{names.get(name, name)}.txt") as tmp:
+            with atomic_path(self.root / "regions" / f"{file_stem(name)}.txt") as tmp:
                 write_region(idx, tmp)
 
     def write_templates(self, templates: dict[str, np.ndarray]) -> None:

@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from facegen.atomic import atomic_path
-from facegen.datasets.biwi import REGION_FILES, DatasetWriter
+from facegen.datasets.biwi import DatasetWriter
 from facegen.datasets.splits import parse_subjects, sequence_name
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, read_mesh, read_region, surface_area, unit_area
+from facegen.face.regions import COMMUNITY_FILES
 from facegen.face.regions import COMMUNITY_FILES
 from facegen.runtime import Say, progress_bar, run_tool, silent, warn_stderr
 
@@ -52,7 +53,7 @@ def normalise_biwi(vertices: np.ndarray, faces: np.ndarray,
     """The community's BIWI normalisation of one mesh: rotate π about x, centre, scale to unit area.
 
     As CodeTalker's creatDataset_BIWI.m / process_BIWI_template.m: V ← V·Rx(π) (row vectors), then
-    V ← V − mean(V), then V ← V / sqrt(total surface area) (facegen.mesh.unit_area). With `reference` =
+    V ← V − mean(V), then V ← V / sqrt(total surface area) (facegen.face.mesh.unit_area). With `reference` =
     (mean, sqrt_area) of the rotated template, frames use the template's centre and scale instead of
     their own. Returns float32 [V, 3].
     """
@@ -254,7 +255,7 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
 
     region_idx = {}
     if regions is not None:
-        for stem, region in REGION_FILES.items():
+        for stem, region in COMMUNITY_FILES.items():
             src = Path(regions) / f"{stem}.txt"
             if not src.is_file():
                 raise FacegenError(f"{src} is missing: pass the folder with lve.txt and fdd.txt as --regions")

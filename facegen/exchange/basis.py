@@ -26,7 +26,7 @@ import numpy as np
 from facegen.animation import Animation
 from facegen.errors import FacegenError
 from facegen.exchange.pca import DEFAULT_TOLERANCE, MorphBasis, max_vertex_error, morph_basis
-from facegen.mesh import Mesh, vertex_normals
+from facegen.face.mesh import Mesh, vertex_normals
 
 RIGS = ("pca", "arkit")
 REST_SHAPE = "rest"

@@ -15,7 +15,7 @@ from facegen.animation import DEFAULT_FPS, Animation, check_animation
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 
 
 def write(

@@ -1,4 +1,5 @@
-"""Template meshes: read/write PLY and OBJ, vertex regions, topology fingerprint, area, normalisation, normals."""
+"""Template meshes: read/write PLY and OBJ, vertex regions, topology fingerprint, area, normalisation,
+normals."""
 
 from __future__ import annotations
 

@@ -1,14 +1,15 @@
-"""A motion rig on the procedural face: channel weights [T, C] -> vertex positions (the curves: synth.curves).
+"""A motion rig on the procedural face: channel weights [T, C] -> vertex positions.
 
 `Rig(mesh)` precomputes smooth per-vertex weights (falloffs of the graph distance over the mesh from
-the named regions of facegen.synth.face) and poses the face from channel weights [T, C]:
+the named regions of facegen.face.procedural) and poses the face from channel weights [T, C]:
 
 * linear offsets (lip shapes, brows, cheeks),
 * the jaw: a rotation about the hinge axis, the lower lip and lower mouth cavity with it,
 * the lids: rotations about each eyeball's centre (blink closes each lid column exactly),
 * lip_close: the lips meet along the slit whatever the jaw does (p, b, m).
 
-The curves that drive it come from timings: facegen.synth.curves.
+The curves that drive it come from timings (facegen.synth.curves). `face_scale` gives any face's eyeball
+centres and its mesh units per cm, the physical unit the rig and the lip-sync metrics measure in.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
+from facegen.face.regions import RIG_REGIONS
 
 LOWER_CHANNELS = ("jaw_open", "lip_close", "lip_round", "lip_wide", "lip_funnel", "lower_lip_tuck",
                   "upper_lip_raise")
@@ -38,9 +40,6 @@ EXPRESSIONS: dict[str, dict[str, float]] = {
 
 EYE_SPACING_CM = 6.3  # distance between the eyeball centres of the canonical face
 JAW_MAX_ANGLE = 0.33  # rad at jaw_open = 1 (about 2 cm between the lips)
-RIG_REGIONS = ("jaw", "jaw_hinge", "mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "right_eyeball",
-             "left_upper_lid_margin", "left_lower_lid_margin", "right_upper_lid_margin",
-             "right_lower_lid_margin", "brows", "forehead", "cheeks")
 
 
 def falloff(d: np.ndarray, radius: float) -> np.ndarray:
@@ -69,6 +68,15 @@ def _fit_centre(points: np.ndarray) -> np.ndarray:
     return -coef[3:] / (2 * coef[:3])
 
 
+def face_scale(vertices: np.ndarray, regions: dict[str, np.ndarray]) -> tuple[np.ndarray, float]:
+    """The eyeball centres [2, 3] (left, right; fitted ellipsoids) of a face with the regions
+    `left_eyeball` and `right_eyeball`, and its mesh units per cm (their distance / EYE_SPACING_CM)."""
+    t = np.asarray(vertices, np.float64)
+    centres = np.stack([_fit_centre(t[np.asarray(regions[f"{side}_eyeball"], np.int64)])
+                        for side in ("left", "right")])
+    return centres, float(np.linalg.norm(centres[0] - centres[1])) / EYE_SPACING_CM
+
+
 def _fit_axes(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """Semi-axes of the axis-aligned ellipsoid about `centre` through `points` (least squares)."""
     d = (np.asarray(points, np.float64) - centre) ** 2
@@ -77,16 +85,16 @@ def _fit_axes(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
 
 
 class Rig:
-    """Deformers on a face made by facegen.synth.face (any speaker: the regions carry the layout).
+    """Deformers on a face made by facegen.face.procedural (any speaker: the regions carry the layout).
 
     Besides posing, it keeps what other deformers of the face build on (facegen.arkit.shapes): `cm` (mesh
     units per cm), `distance` (graph distance in cm) and `smooth`, the per-vertex weight fields in `fields`
     (mouth: `mouth_x` cm across the mouth from its centre, `upper_side`, `d_up`/`d_lo`/`d_m` cm from the
     upper / lower / either lip margin, `lat`, `near`, `peri`, `w_up`, `w_lo`; `brow`, `corner` and `cheek`
     with their distances `d_corner` and `d_cheek`, `squint` (below the lower lids), `jaw` (the jaw's
-    rotation weight)), `mouth_centre` (mesh units), `mouth_half` (cm), the eyeballs' `eye_centres` / `eye_axes` and
-    the lid rotation arrays (`lid_idx`, `lid_upper`, `lid_w`, `lid_alpha`: the angle that closes each lid
-    column, `lid_centre`) used with `rotate_x`.
+    rotation weight)), `mouth_centre` (mesh units), `mouth_half` (cm), the eyeballs' `eye_centres` /
+    `eye_axes` and the lid rotation arrays (`lid_idx`, `lid_upper`, `lid_w`, `lid_alpha`: the angle that
+    closes each lid column, `lid_centre`) used with `rotate_x`.
     """
 
     channels: tuple[str, ...] = CHANNELS
@@ -95,17 +103,16 @@ class Rig:
         missing = [r for r in RIG_REGIONS if r not in mesh.regions]
         if missing:
             raise FacegenError(f"the mesh lacks the rig regions {', '.join(missing)}: "
-                               "use a face from facegen.synth.face (make_face or speaker_face)")
+                               "use a face from facegen.face.procedural (make_face or speaker_face)")
         self.template = np.asarray(mesh.vertices, np.float64)
         self.faces = np.asarray(mesh.faces)
         reg = {k: np.asarray(v, np.int64) for k, v in mesh.regions.items()}
         V = len(self.template)
         t = self.template
         # scale: mesh units per cm, from the distance between the eyeball centres
-        self.eye_centres = np.stack([_fit_centre(t[reg["left_eyeball"]]), _fit_centre(t[reg["right_eyeball"]])])
+        self.eye_centres, cm = face_scale(t, reg)
         self.eye_axes = np.stack([_fit_axes(t[reg[f"{s}_eyeball"]], c)
                                   for s, c in zip(("left", "right"), self.eye_centres, strict=True)])
-        cm = float(np.linalg.norm(self.eye_centres[0] - self.eye_centres[1])) / EYE_SPACING_CM
         self.cm = cm
         self._graph = self._build_graph()
         dist = self.distance
@@ -152,7 +159,8 @@ class Rig:
         Y = (t[:, 1] - t[reg["brows"], 1].mean()) / cm  # cm above the brows
         above = sm(falloff(d_brow, 5.0)) * np.clip(Y / 1.2, 0, 1) ** 2 * (3 - 2 * np.clip(Y / 1.2, 0, 1))
         ramp = np.clip((Y - 0.6) / 0.8, 0, 1)
-        wrinkle = 0.05 * np.sin(2 * np.pi * (Y - 0.6) / 1.1) * falloff(d_brow, 4.5) * ramp * ramp * (3 - 2 * ramp)
+        wrinkle = (0.05 * np.sin(2 * np.pi * (Y - 0.6) / 1.1) * falloff(d_brow, 4.5) * ramp * ramp
+                   * (3 - 2 * ramp))
         off["brow_raise"] = field(dy=0.6 * np.maximum(w_brow, 0.75 * above), dz=wrinkle)
         Xe = t[:, 0] / cm
         inner = np.clip(1.3 - np.abs(Xe) / 4.0, 0.3, 1.0)
@@ -179,7 +187,8 @@ class Rig:
                        "corner": w_corner, "d_corner": d_corner,
                        "cheek": w_cheek, "d_cheek": d_cheek, "squint": w_squint}
         self._linear = [c for c in CHANNELS if c in off]
-        self._offsets = np.stack([off[c] for c in self._linear]).reshape(len(self._linear), -1).astype(np.float32)
+        self._offsets = (np.stack([off[c] for c in self._linear]).reshape(len(self._linear), -1)
+                         .astype(np.float32))
         self._linear_index = np.array([CHANNELS.index(c) for c in self._linear])
 
         # jaw: rigid rotation of the jaw region, smooth falloff around it
@@ -280,7 +289,8 @@ class Rig:
         T = len(w)
         V = len(self.template)
         ch = {c: w[:, i] for i, c in enumerate(CHANNELS)}
-        pos = self.template.astype(np.float32)[None] + (w[:, self._linear_index] @ self._offsets).reshape(T, V, 3)
+        linear = (w[:, self._linear_index] @ self._offsets).reshape(T, V, 3)
+        pos = self.template.astype(np.float32)[None] + linear
         # jaw
         ang = ch["jaw_open"][:, None] * np.float32(JAW_MAX_ANGLE) * self._jaw_w[None, :].astype(np.float32)
         rotate_x(pos, self._jaw_idx, self.hinge.astype(np.float32), ang)

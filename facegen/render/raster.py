@@ -15,7 +15,7 @@ Nothing outside PyPI is needed: no EGL/OSMesa system libraries, no display, and 
 every machine (tests can reason about them). The first call on a new install compiles the kernels (a few
 seconds); numba caches them beside this module (or in its user cache) for later runs.
 
-Image: per-pixel (Phong) shading of interpolated vertex normals (facegen.mesh.vertex_normals, every frame),
+Image: per-pixel (Phong) shading of interpolated vertex normals (face.mesh.vertex_normals, every frame),
 a key light from the upper left and a fill light from the right (fixed to the camera, so every view is lit
 alike), a neutral skin colour, a dark background, two-sided lighting (the mask is an open surface),
 2 x 2 supersampling, sRGB output.
@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.mesh import vertex_normals
+from facegen.face.mesh import vertex_normals
 
 VIEWS: dict[str, float] = {"front": 0.0, "three_quarter": 40.0, "profile": 90.0}  # yaw, degrees
 DEFAULT_VIEWS = ("front", "three_quarter")

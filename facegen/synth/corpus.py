@@ -6,7 +6,7 @@ like BIWI's 40, e41–e48 with held-out emotional words). Each speaker has
 * a voice: an espeak-ng language (en-us, en, en-gb-x-rp, en-us-nyc, en-029, en-gb-scotland), a variant
   (female variants for F*, male for M*), a pitch (0–100) and a rate (135–155 words per minute, chosen so
   the sentences last 4.7 s on average, BIWI's mean) — see SPEAKERS;
-* a face shape: facegen.synth.face.speaker_face(index) and a motion style
+* a face shape: facegen.face.procedural.speaker_face(index) and a motion style
   SpeakerStyle.for_speaker(index), where index is the speaker's place in SPEAKERS (F1 = 0 … M6 = 13).
 
 Per sequence {subj}_e{NN}: the synthesiser's audio (wav/, 16-bit PCM at espeak's 22,050 Hz), the motion
@@ -150,8 +150,8 @@ def motion(speech, rig, style, rng: np.random.Generator, fps: float = 25.0) -> n
 def speaker_rig(speaker: str):
     """(Rig on the speaker's face, the speaker's SpeakerStyle)."""
     from facegen.synth.curves import SpeakerStyle
-    from facegen.synth.face import speaker_face
-    from facegen.synth.rig import Rig
+    from facegen.face.procedural import speaker_face
+    from facegen.face.rig import Rig
 
     i = speaker_index(speaker)
     return Rig(speaker_face(i)), SpeakerStyle.for_speaker(i)
@@ -265,7 +265,7 @@ def _difference(old: dict, new: dict) -> str:
 
 
 def _check_space(out: Path, sequences: int, fps: float) -> None:
-    from facegen.synth.face import NUM_VERTICES
+    from facegen.face.procedural import NUM_VERTICES
 
     need = sequences * MEAN_SECONDS * fps * NUM_VERTICES * 12 * 1.1
     free = shutil.disk_usage(out).free
@@ -277,7 +277,7 @@ def _check_space(out: Path, sequences: int, fps: float) -> None:
 
 def _write_static(out: Path, writer, wanted: dict[str, tuple[int, ...]], read_templates_pkl) -> None:
     """BIWI.ply with regions, templates.pkl (merged with the speakers already there), sentences.txt."""
-    from facegen.synth.face import make_face, speaker_face
+    from facegen.face.procedural import make_face, speaker_face
 
     if not (out / "BIWI.ply").is_file():
         writer.write_mesh(make_face())

@@ -1,6 +1,6 @@
 """Emotional words whose meaning moves the upper face of the synthetic speakers.
 
-Each word has an expression class (see facegen.synth.rig.EXPRESSIONS: surprise raises the brows, anger
+Each word has an expression class (see facegen.face.rig.EXPRESSIONS: surprise raises the brows, anger
 and sadness frown, fear and awe widen the eyes, joy raises the cheeks), an intensity in (0, 1] and a role
 for sentence templates (ROLES: an experiencer adjective says how a person feels, a stimulus adjective what
 something is like; other words are for hand-written sentences).
@@ -20,7 +20,7 @@ ROLES = ("experiencer", "stimulus", "other")
 
 @dataclass(frozen=True)
 class Emotion:
-    cls: str  # a key of facegen.synth.rig.EXPRESSIONS
+    cls: str  # a key of facegen.face.rig.EXPRESSIONS
     intensity: float
     role: str = "other"  # one of ROLES
 

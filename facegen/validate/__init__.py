@@ -20,7 +20,7 @@ from facegen.validate.report import DEFAULT_MAX_DISPLACEMENT, Expected, Report
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
-    from facegen.mesh import Mesh
+    from facegen.face.mesh import Mesh
 
 def validate(
     path: str | os.PathLike,

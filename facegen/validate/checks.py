@@ -21,7 +21,7 @@ import numpy as np
 
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
-from facegen.mesh import Mesh
+from facegen.face.mesh import Mesh
 from facegen.validate.report import Report
 
 Opened = TypeVar("Opened")

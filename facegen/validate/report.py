@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
-    from facegen.mesh import Mesh
+    from facegen.face.mesh import Mesh
 
 DEFAULT_MAX_DISPLACEMENT = 0.25
 
