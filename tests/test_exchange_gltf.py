@@ -415,7 +415,7 @@ def test_rig_option_errors(clip, tmp_path, grid_mesh):
     bad = {
         "unknown rig": (clip, "x.glb", {"rig": "metahuman"}, "unknown rig 'metahuman'"),
         "pca sizing": (clip, "x.glb", {"rig": "arkit", "morph_targets": 8}, "--morph-targets size the PCA basis"),
-        "usd points": (clip, "x.usda", {"rig": "arkit", "mode": "points"}, "drop --usd-mode points"),
+        "usd points": (clip, "x.usda", {"rig": "arkit", "mode": "points"}, "drop the points mode"),
         "other format": (clip, "x.npy", {"rig": "arkit"}, "rig does not apply to .npy files"),
         "no regions": (make_animation(grid_mesh, frames=5), "x.glb", {"rig": "arkit"}, "region"),
     }

@@ -191,7 +191,7 @@ def test_failed_long_write_leaves_nothing_and_keeps_the_old_asset(tmp_path, grid
     ({"clips": 0}, "auto, never or a positive number"),
     ({"clips": "sometimes"}, "auto, never or a positive number"),
     ({"clips": True}, "auto, never or a positive number"),
-    ({"clips": 8, "mode": "blendshapes"}, "--usd-mode points"),
+    ({"clips": 8, "mode": "blendshapes"}, "use the points mode"),
 ])
 def test_bad_clip_options(tmp_path, grid_mesh, options, message):
     with pytest.raises(FacegenError, match=message):

@@ -67,8 +67,9 @@ def check_write_options(path: str | os.PathLike, options: dict) -> None:
     them (a front end says how it spells them)."""
     unknown = sorted(set(options) - set(format_of(path).options + COMMON_OPTIONS))
     if unknown:
-        raise FacegenError(f"{', '.join(unknown)} {'does' if len(unknown) == 1 else 'do'} not apply to "
-                           f"{Path(path).suffix} files: drop it or choose another output format",
+        one = len(unknown) == 1
+        raise FacegenError(f"{', '.join(unknown)} {'does' if one else 'do'} not apply to {Path(path).suffix} "
+                           f"files: drop {'it' if one else 'them'} or choose another output format",
                            param=tuple(unknown) if len(unknown) > 1 else unknown[0])
 
 
