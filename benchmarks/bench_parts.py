@@ -20,6 +20,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args(argv)
 
+    from facegen.audio import FeatureConfig
     from facegen.face.template import load_template
     from facegen.face.rig import Rig
     from facegen.text import frame_features, load_text_backend
@@ -39,7 +40,9 @@ def main(argv: list[str] | None = None) -> int:
 
     spans = [Word("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, 1500), strict=True)]
     vectors = rng.normal(size=(1500, 384)).astype(np.float32)
-    rows.append(("text frames, 10 min", best_of(lambda: frame_features(spans, vectors, 15_000, 25.0), args.runs), 3.0))
+    config = FeatureConfig(fps=25.0)
+    rows.append(("text frames, 10 min", best_of(lambda: frame_features(spans, vectors, 15_000, config), args.runs),
+                 3.0))
 
     from facegen.synth.sentences import generated_sentences
 

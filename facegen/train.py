@@ -1,8 +1,7 @@
-"""Training: the paper's setup on a dataset in the BIWI community layout, resumable and deterministic.
-
-Defaults follow the paper: mean squared error over all vertex coordinates, Adam with a constant
-learning rate of 1e-4, one sequence per step, 100 epochs. `batch_size` > 1 averages the gradients of
-that many sequences per optimizer step (sequences are never padded).
+"""Training: a TrainConfig (facegen.train_config; the paper's setup by default) on a dataset in the BIWI
+community layout, resumable and deterministic. `train` runs it in steps: check the output paths, load the data
+and its features, fit the PCA basis (output "pca"), build the model (`_Run`), resume, run the epochs,
+write the bundle.
 
 Every epoch: the validation loss is computed, the weights with the lowest validation loss so far are
 kept (without a validation split, the lowest training loss), and one checkpoint file is written
@@ -41,18 +40,15 @@ import numpy as np
 import torch
 
 from facegen.atomic import atomic_path, check_writable
-from facegen.datasets.biwi import Dataset, Item
-from facegen.datasets.cache import BadSequence
-from facegen.datasets.splits import Splits
+from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
+from facegen.model import FaceModel, ModelConfig
+from facegen.phonetics import PHONES
+from facegen.runtime import Say, progress_bar, say_stderr, select_device, silent, warn_stderr
 from facegen.runtime import threads as thread_limit
 from facegen.train_config import TrainConfig
 from facegen.train_data import Batch, PcaTargets, TrainData, load_train_data, make_batches, pca_targets
-from facegen.model import FaceModel, ModelConfig, one_hot
-from facegen.model_config import FUSIONS, MODALITIES
-from facegen.phonetics import PHONES
-from facegen.runtime import Say, progress_bar, say_stderr, select_device, silent, warn_stderr
 
 CHECKPOINT = "checkpoint.safetensors"
 CHECKPOINT_VERSION = 1
@@ -199,7 +195,7 @@ def load_checkpoint(path: Path) -> tuple[dict[str, torch.Tensor], dict]:
         tensors = load_file(str(path))
     except Exception as exc:  # safetensors has its own error types
         raise FacegenError(f"checkpoint {path} is unreadable ({exc}): delete it and train without "
-                           "--resume") from exc
+                           "resuming", param="resume") from exc
     if meta.get("version", 0) > CHECKPOINT_VERSION:
         raise FacegenError(f"checkpoint {path} was written by a newer facegen: upgrade facegen")
     return tensors, meta
@@ -257,34 +253,16 @@ def default_checkpoint_dir(out_bundle: str | os.PathLike) -> Path:
 def train(
     data_root: str | os.PathLike,
     out_bundle: str | os.PathLike,
+    config: TrainConfig | None = None,
     *,
-    text_backend: str = "minilm",
-    text_model_path: str | os.PathLike | None = None,
-    modalities: str = "both",
-    fusion: str = "tensor",
-    epochs: int = 100,
-    lr: float = 1e-4,
-    batch_size: int = 1,
-    seed: int = 0,
     device: str = "auto",
+    threads: int | None = None,
     resume: bool = False,
-    splits: Splits | None = None,
     checkpoint_dir: str | os.PathLike | None = None,
     cache_dir: str | os.PathLike | None = None,
-    max_sequences: int | None = None,
+    text_model_path: str | os.PathLike | None = None,
     on_bad: str = "skip",
-    model_options: dict | None = None,
-    threads: int | None = None,
     quiet: bool = False,
-    half: bool = False,
-    precision: str | None = None,
-    output: str = "full",
-    basis: int = 64,
-    lip_weight: float = 0.0,
-    velocity_weight: float = 0.0,
-    upper_weight: float = 0.0,
-    patience: int | None = None,
-    phones: bool = False,
     warn: Say | None = warn_stderr,
 ) -> TrainResult:
     """Train the model `config` describes (default: the paper's setup) on the dataset at `data_root`;
@@ -297,6 +275,8 @@ def train(
     sequences, "fail" stops at the first; `quiet` silences progress, `warn` gets the skipped sequences
     (None: nothing).
     """
+    config = config or TrainConfig()
+    config.check()
     say = silent if quiet else say_stderr
     out_bundle, ckpt_dir = _output_paths(Path(out_bundle), checkpoint_dir)
     dev = select_device(device)
@@ -356,146 +336,121 @@ def _output_paths(out_bundle: Path, checkpoint_dir: str | os.PathLike | None) ->
     """The bundle's path and the checkpoint folder, both checked writable before hours of training."""
     if out_bundle.suffix.lower() != ".safetensors":
         given = out_bundle.suffix or "a name without extension"
-        raise FacegenError(f"a model bundle is a .safetensors file, not {given}: use -o "
-                           f"{out_bundle.with_suffix('.safetensors').name}")
-    check_writable(out_bundle)  # before hours of training, not after
+        raise FacegenError(f"a model bundle is a .safetensors file, not {given}: name it "
+                           f"{out_bundle.with_suffix('.safetensors').name}", param="out_bundle")
+    check_writable(out_bundle)
     ckpt_dir = Path(checkpoint_dir) if checkpoint_dir is not None else default_checkpoint_dir(out_bundle)
-    ckpt_path = ckpt_dir / CHECKPOINT
     existing = next(p for p in (ckpt_dir.absolute(), *ckpt_dir.absolute().parents) if p.exists())
     if not existing.is_dir() or not os.access(existing, os.W_OK):
         raise FacegenError(f"cannot write the checkpoint folder {ckpt_dir} ({existing} is not a writable "
                            "folder): pass a writable checkpoint folder", param="checkpoint_dir")
     return out_bundle, ckpt_dir
 
-    with torch_settings(threads):
-        torch.manual_seed(seed)
+
+class _Run:
+    """The model and optimizer of one train() call and where training stands (epochs done, loss history,
+    the best epoch's weights), with the steps that move it on: resume, epochs."""
+
+    def __init__(self, config: TrainConfig, cfg: ModelConfig, data: TrainData, basis: PcaTargets | None,
+                 dev: torch.device, ckpt_dir: Path, say: Say) -> None:
+        self.config, self.ckpt_dir, self.say = config, ckpt_dir, say
+        torch.manual_seed(config.seed)
         model = FaceModel(cfg)
-        if output == "pca":
-            model.set_basis(torch.from_numpy(pca), torch.from_numpy(pca_mean))
-        mels = np.concatenate([it.mel for it in train_items]).astype(np.float64)
+        if basis is not None:
+            model.set_basis(torch.from_numpy(basis.pca), torch.from_numpy(basis.mean))
+        mels = np.concatenate([it.mel for it in data.train]).astype(np.float64)
         with torch.no_grad():
             model.mel_mean.copy_(torch.from_numpy(mels.mean(0)).float())
             model.mel_std.copy_(torch.from_numpy(mels.std(0)).float().clamp(min=MIN_MEL_STD))
-        model.to(dev).train()
-        optimizer = torch.optim.Adam(model.parameters(), lr=lr, fused=dev.type in ("cpu", "cuda"))
-        best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
-        history: list[dict] = []
-        best_epoch, best_loss, done, seconds_before = 0, math.inf, 0, 0.0
+        self.model = model.to(dev).train()
+        self.optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, fused=dev.type in ("cpu", "cuda"))
+        self.best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+        self.history: list[dict] = []
+        self.best_epoch, self.best_loss = 0, math.inf
+        self.done, self.seconds_before = 0, 0.0  # epochs of earlier calls (resumed) and their time
+        self.epochs_run = 0  # epochs of this call
 
-        if resume and ckpt_path.is_file():
-            tensors, meta = load_checkpoint(ckpt_path)
-            differs = [k for k in signature if meta.get("signature", {}).get(k) != signature[k]]
-            if differs:
-                raise FacegenError(f"checkpoint {ckpt_path} was made with a different setup "
-                                   f"({', '.join(differs)} differ): train without --resume, or with another "
-                                   "--checkpoint-dir")
-            best_state = _restore(tensors, meta, model, optimizer)
-            history, done = meta["history"], int(meta["epoch"])
-            best_epoch, best_loss = int(meta["best_epoch"]), float(meta["best_loss"])
-            seconds_before = float(meta.get("seconds", 0.0))
-            for group in optimizer.param_groups:
-                if group["lr"] != lr:
-                    say(f"learning rate changed from {group['lr']:g} to {lr:g}")
-                    group["lr"] = lr
-            say(f"resuming after epoch {done} from {ckpt_path}")
-        elif resume:
-            say(f"no checkpoint in {ckpt_dir}: starting from scratch")
-        try:
-            ckpt_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise FacegenError(f"cannot create the checkpoint folder {ckpt_dir} ({exc.strerror}): "
-                               "pass --checkpoint-dir to a writable folder") from exc
+    def resume(self, signature: dict) -> None:
+        """Continue from the checkpoint when there is one made with the same `signature`."""
+        path, lr, say = self.ckpt_dir / CHECKPOINT, self.config.lr, self.say
+        if not path.is_file():
+            say(f"no checkpoint in {self.ckpt_dir}: starting from scratch")
+            return
+        tensors, meta = load_checkpoint(path)
+        stored = dict(meta.get("signature", {}))
+        if "feature_config" in stored:  # written before a feature setting existed: its default
+            stored["feature_config"] = FeatureConfig.from_dict(stored["feature_config"]).to_dict()
+        differs = [k for k in signature if stored.get(k) != signature[k]]
+        if differs:
+            raise FacegenError(f"checkpoint {path} was made with a different setup ({', '.join(differs)} "
+                               "differ): train without resuming, or with another checkpoint folder",
+                               param=("resume", "checkpoint_dir"))
+        self.best_state = _restore(tensors, meta, self.model, self.optimizer)
+        self.history, self.done = meta["history"], int(meta["epoch"])
+        self.best_epoch, self.best_loss = int(meta["best_epoch"]), float(meta["best_loss"])
+        self.seconds_before = float(meta.get("seconds", 0.0))
+        for group in self.optimizer.param_groups:
+            if group["lr"] != lr:
+                say(f"learning rate changed from {group['lr']:g} to {lr:g}")
+                group["lr"] = lr
+        say(f"resuming after epoch {self.done} from {path}")
 
-        speaker_of = {s: i for i, s in enumerate(speakers)}
-        train_batches = [Batch(it, speaker_of[it.subject], len(speakers), dev) for it in train_items]
-        val_batches = [Batch(it, speaker_of[it.subject], len(speakers), dev) for it in val_items
-                       if it.subject in speaker_of]
-        for b in train_batches + val_batches:
-            if b.item.name in coefficients:
-                b.coefficients = torch.from_numpy(coefficients[b.item.name]).to(dev)
-            if phones:
-                try:
-                    b.phones = torch.from_numpy(dataset.phones(b.item.seq, b.item.num_frames, features.fps))[None]
-                except BadSequence as exc:
-                    raise FacegenError(f"{exc}: train the phone stream on a corpus with phone timings "
-                                       "(facegen data synth --preset voices)") from None
-                b.phones = b.phones.to(dev)
-        say(f"training {modalities} ({fusion}) on {len(train_batches)} sequences, validating on "
-            f"{len(val_batches)}, {epochs} epochs, device {dev}")
+    def epochs(self, train_batches: list[Batch], val_batches: list[Batch], basis: PcaTargets | None,
+               signature: dict, quiet: bool) -> float:
+        """Run the epochs left (a checkpoint and the curves after each); the training time in total (s)."""
+        config, ckpt_dir, say = self.config, self.ckpt_dir, self.say
         run_start = last_png = time.perf_counter()
         for epoch in range(self.done, config.epochs):
             if config.patience is not None and self.best_epoch and epoch - self.best_epoch >= config.patience:
                 say(f"no better validation loss for {config.patience} epochs: stopping after epoch {epoch}")
                 break
             t0 = time.perf_counter()
-            order = epoch_order(seed, epoch, len(train_batches))
-            bar = progress_bar(total=len(order), desc=f"epoch {epoch + 1}/{epochs}", unit="seq", enabled=not quiet,
-                               leave=False)
+            order = epoch_order(config.seed, epoch, len(train_batches))
+            bar = progress_bar(total=len(order), desc=f"epoch {epoch + 1}/{config.epochs}", unit="seq",
+                               enabled=not quiet, leave=False)
             try:
-                train_loss = train_epoch(model, optimizer, train_batches, order, batch_size, bar,
-                                         coefficient_loss)
+                train_loss = train_epoch(self.model, self.optimizer, train_batches, order, config.batch_size,
+                                         bar, basis.loss if basis is not None else None)
             except _NonFinite as exc:
                 kept = (f"the last good checkpoint (epoch {epoch}) is in {ckpt_dir}" if epoch else
                         "no checkpoint was written yet")
                 raise FacegenError(
                     f"the training loss became {exc.value} at epoch {epoch + 1} on {exc.name}: training "
-                    f"stopped and {kept}: lower --lr (and --resume), or check that sequence") from None
+                    f"stopped and {kept}: lower the learning rate (and resume), or check that sequence",
+                    param=("lr", "resume")) from None
             bar.close()
-            val_loss = _validate(model, val_batches, val_loss_fn)
+            val_loss = _validate(self.model, val_batches, basis.val_loss if basis is not None else None)
             score = val_loss if val_batches else train_loss
-            improved = score < best_loss
+            improved = score < self.best_loss
             if improved:
-                best_epoch, best_loss = epoch + 1, score
-                best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
-            history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
-                            "seconds": time.perf_counter() - t0})
-            epochs_run += 1
-            seconds = seconds_before + time.perf_counter() - run_start
-            save_checkpoint(ckpt_path, model, best_state, optimizer, {
-                "signature": signature, "epoch": epoch + 1, "history": history, "best_epoch": best_epoch,
-                "best_loss": best_loss, "seconds": seconds})
-            if time.perf_counter() - last_png > PNG_EVERY:  # drawing takes ~0.3 s: not after short epochs
-                write_curves(history, ckpt_dir)
+                self.best_epoch, self.best_loss = epoch + 1, score
+                self.best_state = {k: v.detach().cpu().clone() for k, v in self.model.state_dict().items()}
+            self.history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
+                                 "seconds": time.perf_counter() - t0})
+            self.epochs_run += 1
+            save_checkpoint(ckpt_dir / CHECKPOINT, self.model, self.best_state, self.optimizer, {
+                "signature": signature, "epoch": epoch + 1, "history": self.history,
+                "best_epoch": self.best_epoch, "best_loss": self.best_loss,
+                "seconds": self.seconds_before + time.perf_counter() - run_start})
+            png = time.perf_counter() - last_png > PNG_EVERY  # drawing takes ~0.3 s: not after short epochs
+            write_curves(self.history, ckpt_dir, png=png)
+            if png:
                 last_png = time.perf_counter()
-            else:
-                write_curves(history, ckpt_dir, png=False)
-            say(f"epoch {epoch + 1}/{epochs}: train {train_loss:.4e}  val {val_loss:.4e}  "
-                f"({history[-1]['seconds']:.1f} s){'  best' if improved else ''}")
-        seconds = seconds_before + time.perf_counter() - run_start
-        csv_path, png_path = write_curves(history, ckpt_dir)
-
-        model.load_state_dict(best_state)
-        bundle = _make_bundle(model.cpu().eval(), features, filters, backend, speakers, mesh, {
-            "data": dataset.root.resolve().name, "epochs": len(history), "best_epoch": best_epoch,
-            "best_loss": best_loss, "loss": "val" if val_batches else "train",
-            "metrics": ({k: history[best_epoch - 1][k] for k in ("train_loss", "val_loss")}
-                        if best_epoch else {}),
-            "history": loss_history(history), "train_seconds": round(seconds, 1), "split": splits.to_dict(),
-            "train_sequences": len(train_batches), "val_sequences": len(val_batches), "seed": seed, "lr": lr,
-            "batch_size": batch_size, "device": str(dev), "output": output,
-            **({"basis": basis, "basis_variance": round(kept, 6), "lip_weight": lip_weight,
-                "velocity_weight": velocity_weight, "upper_weight": upper_weight} if output == "pca" else {}),
-            **({"patience": patience} if patience else {}), **({"phones": "per-frame CMU phones"} if phones else {})})
-        from facegen.bundle import save_bundle
-
-        save_bundle(bundle, out_bundle, precision=precision or ("fp16" if half else "fp32"))
-        say(f"wrote {out_bundle} (best epoch {best_epoch}, {'validation' if val_batches else 'training'} "
-            f"loss {best_loss:.4e}); curves in {csv_path}" + (f" and {png_path}" if png_path else ""))
-    skipped = list(dataset.skipped)
-    return TrainResult(bundle=out_bundle, checkpoint_dir=ckpt_dir, epochs=len(history), epochs_run=epochs_run,
-                       best_epoch=best_epoch, best_loss=best_loss, history=history, seconds=seconds,
-                       curves_csv=csv_path, curves_png=png_path, train_sequences=len(train_batches),
-                       val_sequences=len(val_batches), skipped=skipped)
+            say(f"epoch {epoch + 1}/{config.epochs}: train {train_loss:.4e}  val {val_loss:.4e}  "
+                f"({self.history[-1]['seconds']:.1f} s){'  best' if improved else ''}")
+        return self.seconds_before + time.perf_counter() - run_start
 
 
-def _make_bundle(model: FaceModel, features, filters: np.ndarray, backend, speakers: list[str], mesh,
-                 provenance: dict):
+def _make_bundle(model: FaceModel, data: TrainData, speakers: list[str], provenance: dict):
+    """The bundle of a trained model: its features, the dataset's face as template, speakers, provenance."""
     from facegen import __version__
     from facegen.bundle import Bundle
     from facegen.face.mesh import Mesh
 
+    mesh = data.mesh
     template = Mesh(mesh.vertices.astype(np.float32), mesh.faces, dict(mesh.regions))
-    return Bundle(model=model, features=features, mel_filters=filters,
-                  text_backend=backend.id if backend is not None else "none", speakers=speakers,
-                  template=template, provenance=dict(provenance, facegen=__version__, trained=time.strftime(
-                      "%Y-%m-%dT%H:%M:%S%z")))
+    return Bundle(model=model, features=data.features, mel_filters=data.filters,
+                  text_backend=data.backend.id if data.backend is not None else "none",
+                  speakers=speakers, template=template,
+                  provenance=dict(provenance, facegen=__version__,
+                                  trained=time.strftime("%Y-%m-%dT%H:%M:%S%z")))

@@ -290,12 +290,18 @@ SMALL = {"conv_channels": 16, "audio_dim": 16, "text_hidden": 16, "text_dim_out"
 
 
 def train_toy(toy, out, **kw):
-    from facegen.train import train
+    """Train a small audio model on the toy dataset for 2 epochs, quietly on one CPU thread; `kw` overrides
+    TrainConfig fields and train()'s run-time arguments (device, resume, ...) alike."""
+    import dataclasses
 
-    options = {"modalities": "audio", "epochs": 2, "lr": 3e-3, "splits": TOY_SPLITS, "device": "cpu",
-               "model_options": SMALL, "quiet": True, "cache_dir": toy / ".cache", "threads": 1}
-    options.update(kw)
-    return train(toy, out, **options)
+    from facegen.train import train
+    from facegen.train_config import TrainConfig
+
+    options = {"modalities": "audio", "epochs": 2, "lr": 3e-3, "splits": TOY_SPLITS, "model_options": SMALL,
+               "device": "cpu", "quiet": True, "cache_dir": toy / ".cache", "threads": 1, **kw}
+    fields = {f.name for f in dataclasses.fields(TrainConfig)}
+    config = TrainConfig(**{k: v for k, v in options.items() if k in fields})
+    return train(toy, out, config, **{k: v for k, v in options.items() if k not in fields})
 
 
 

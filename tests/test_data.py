@@ -143,7 +143,7 @@ def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     from facegen.alignment_files import read_alignment
 
     words = read_alignment(toy / "alignments" / "F2_e01.json")
-    np.testing.assert_array_equal(it.text, text_features(words, gpt2_backend, it.num_frames, FPS))
+    np.testing.assert_array_equal(it.text, text_features(words, gpt2_backend, it.num_frames, feats))
     assert it.vertices().shape == (it.num_frames, 600) and it.vertices().dtype == np.float32
     cached = sorted(p.name for p in (toy / "cache1" / "features").iterdir())
     assert sum(".mel-" in n for n in cached) == 3 and sum(".text-" in n for n in cached) == 3

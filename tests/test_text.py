@@ -12,6 +12,7 @@ import torch
 from helpers import make_tiny_gpt2
 from transformers import AutoTokenizer
 
+from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
 from facegen.text import (
     _minilm_folder,
@@ -21,6 +22,11 @@ from facegen.text import (
     text_features,
     zero_features,
 )
+
+
+def features(fps: float, window: tuple[int, int] = (8, 7)) -> FeatureConfig:
+    """A FeatureConfig with this fps and text smoothing window."""
+    return FeatureConfig(fps=fps, text_window=window)
 
 
 @dataclass
@@ -220,12 +226,13 @@ def test_minilm_missing_or_broken_files_are_one_line(tmp_path):
 
     from facegen.minilm import load_minilm
 
-    with pytest.raises(FacegenError, match="tokenizer.json are missing from .*--text-model PATH"):
+    with pytest.raises(FacegenError, match="tokenizer.json are missing from .*a text model folder") as err:
         load_minilm(tmp_path)
+    assert err.value.param == "text_model"
     for name in ("config.json", "tokenizer.json"):
         shutil.copy(f"{_minilm_folder()}/{name}", tmp_path / name)
     (tmp_path / "model.safetensors").write_bytes(b"\x00" * 64)
-    with pytest.raises(FacegenError, match="cannot read the MiniLM files in .*--text-model PATH"):
+    with pytest.raises(FacegenError, match="cannot read the MiniLM files in .*pass a text model folder"):
         load_minilm(tmp_path)
 
 
@@ -249,26 +256,27 @@ def test_minilm_long_transcript(minilm):
 
 def test_missing_weights_name_text_model_option(tmp_path):
     with pytest.raises(
-        FacegenError, match="GPT-2 weights for 'openai-community/gpt2-not-here'.*--text-model PATH"
-    ):
+        FacegenError, match="GPT-2 weights for 'openai-community/gpt2-not-here'.*pass a local folder"
+    ) as err:
         load_text_backend("openai-community/gpt2-not-here")
-    with pytest.raises(FacegenError, match="not available offline.*--text-model PATH"):
+    assert err.value.param == "text_model"  # the CLI says --text-model
+    with pytest.raises(FacegenError, match="not available offline.*pass a local folder"):
         load_text_backend("facegen-tests/no-such-model")
-    with pytest.raises(FacegenError, match="does not exist.*--text-model PATH"):
+    with pytest.raises(FacegenError, match="does not exist.*pass a local folder"):
         load_text_backend("gpt2", tmp_path / "nowhere")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(FacegenError, match="cannot load a text model.*--text-model PATH"):
+    with pytest.raises(FacegenError, match="cannot load a text model.*pass a local folder") as err:
         load_text_backend("gpt2", tmp_path / "empty")
+    assert err.value.param == "text_model"
 
 
 def test_gpt2_not_in_cache_names_text_model_option():
     try:
         backend = load_text_backend("gpt2")
     except FacegenError as exc:
-        assert str(exc) == (
-            "GPT-2 weights for 'gpt2' are not available offline: pass --text-model PATH "
-            "to a local folder with a GPT-2 model"
-        )
+        assert str(exc) == ("GPT-2 weights for 'gpt2' are not available offline: pass a local folder with a "
+                            "GPT-2 model")
+        assert exc.param == "text_model"
     else:  # real GPT-2 happens to be in the local HF cache
         assert backend.dim == 768
 
@@ -285,7 +293,7 @@ def test_frame_layout_exact():
         W("d", 1.85, 2.50),  # runs past the end: frames 18 19
         W("e", 3.00, 3.50),  # wholly after the last frame: dropped
     ]
-    raw = frame_features(words, eye, num_frames=20, fps=10, window=(0, 0))
+    raw = frame_features(words, eye, num_frames=20, config=features(10, (0, 0)))
     assert raw.shape == (20, 5) and raw.dtype == np.float32
     owner = np.full(20, -1)
     owner[[0, 1, 2]], owner[[5, 6]], owner[10], owner[[18, 19]] = 0, 1, 2, 3
@@ -295,7 +303,7 @@ def test_frame_layout_exact():
     # gaps are exactly zero before smoothing
     assert not raw[[3, 4, 7, 8, 9, 11, 17]].any()
 
-    smoothed = frame_features(words, eye, num_frames=20, fps=10)
+    smoothed = frame_features(words, eye, num_frames=20, config=features(10))
     np.testing.assert_allclose(smoothed, naive_smooth(expected), atol=1e-6)
     # frame 0: window frames 0..7 (8 present): three 'a' frames, two 'b' frames
     np.testing.assert_allclose(smoothed[0], [3 / 8, 2 / 8, 0, 0, 0], atol=1e-6)
@@ -305,17 +313,35 @@ def test_frame_layout_exact():
     np.testing.assert_allclose(smoothed[19], [0, 0, 0, 2 / 9, 0], atol=1e-6)
 
 
+def test_the_smoothing_window_is_the_feature_configs():
+    """The window comes from the FeatureConfig passed in (a bundle's), the paper's 8 before / 7 after by
+    default; an older bundle's header without it reads as that default."""
+    rng = np.random.default_rng(3)
+    words = [W("a", 0.0, 0.3), W("b", 0.5, 0.9), W("c", 1.2, 1.5)]
+    vectors = rng.normal(size=(3, 4)).astype(np.float32)
+    raw = frame_features(words, vectors, 40, features(25.0, (0, 0)))
+    np.testing.assert_allclose(frame_features(words, vectors, 40, features(25.0, (3, 1))), naive_smooth(raw, 3, 1),
+                               atol=1e-6)
+    np.testing.assert_allclose(frame_features(words, vectors, 40, FeatureConfig()), naive_smooth(raw, 8, 7),
+                               atol=1e-6)
+    assert FeatureConfig().text_window == (8, 7)
+    header = FeatureConfig(text_window=(3, 1)).to_dict()
+    assert header["text_window"] == [3, 1] and FeatureConfig.from_dict(header).text_window == (3, 1)
+    old = {k: v for k, v in header.items() if k != "text_window"}
+    assert FeatureConfig.from_dict(old) == FeatureConfig()
+
+
 def test_frame_centre_rule_at_boundaries():
     eye = np.eye(2, dtype=np.float32)
     # at 25 fps frame t's centre is (t + 0.5) / 25: 0.02, 0.06, 0.10, ...
-    raw = frame_features([W("x", 0.02, 0.10), W("y", 0.10, 0.18)], eye, 6, 25.0, window=(0, 0))
+    raw = frame_features([W("x", 0.02, 0.10), W("y", 0.10, 0.18)], eye, 6, features(25.0, (0, 0)))
     np.testing.assert_array_equal(raw[:, 0], [1, 1, 0, 0, 0, 0])  # start inclusive, end exclusive
     np.testing.assert_array_equal(raw[:, 1], [0, 0, 1, 1, 0, 0])
 
 
 def test_overlapping_words_later_wins():
     eye = np.eye(2, dtype=np.float32)
-    raw = frame_features([W("x", 0.0, 0.4), W("y", 0.2, 0.3)], eye, 5, 10.0, window=(0, 0))
+    raw = frame_features([W("x", 0.0, 0.4), W("y", 0.2, 0.3)], eye, 5, features(10.0, (0, 0)))
     np.testing.assert_array_equal(raw.argmax(axis=1), [0, 0, 1, 0, 0])
 
 
@@ -335,9 +361,9 @@ def test_ten_minutes_of_words():
     starts = np.sort(rng.uniform(0, 600, n_words))
     words = [W("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, n_words), strict=True)]
     vectors = rng.normal(size=(n_words, dim)).astype(np.float32)
-    feats = frame_features(words, vectors, frames, fps)
+    feats = frame_features(words, vectors, frames, features(fps))
     assert feats.shape == (frames, dim) and feats.dtype == np.float32
-    raw = frame_features(words, vectors, frames, fps, window=(0, 0))
+    raw = frame_features(words, vectors, frames, features(fps, (0, 0)))
     for t in (0, 5, 7_777, 14_995, 14_999):
         lo, hi = max(0, t - 8), min(frames, t + 8)
         np.testing.assert_allclose(feats[t], raw[lo:hi].mean(axis=0), atol=1e-4)
@@ -345,17 +371,17 @@ def test_ten_minutes_of_words():
 
 def test_frame_features_checks_vector_count():
     with pytest.raises(ValueError):
-        frame_features([W("a", 0, 1)], np.zeros((2, 3), np.float32), 10, 25.0)
+        frame_features([W("a", 0, 1)], np.zeros((2, 3), np.float32), 10, features(25.0))
 
 
 def test_text_features_end_to_end(minilm):
     words = [W("Hello", 0.10, 0.45), W("there,", 0.50, 0.80), W("friend.", 0.95, 1.40)]
-    feats = text_features(words, minilm, num_frames=75, fps=25.0)
+    feats = text_features(words, minilm, num_frames=75, config=features(25.0))
     assert feats.shape == (75, 384) and feats.dtype == np.float32
     vecs = minilm.word_vectors([w.text for w in words])
-    np.testing.assert_allclose(feats, frame_features(words, vecs, 75, 25.0), atol=1e-6)
+    np.testing.assert_allclose(feats, frame_features(words, vecs, 75, features(25.0)), atol=1e-6)
     # last spoken frame is 34 (centre 1.38 s); frames from 34 + 8 + 1 on see only silence
     assert feats[43:].any(axis=1).sum() == 0 and feats[42].any()
-    assert text_features([], minilm, 10, 25.0).shape == (10, 384)
+    assert text_features([], minilm, 10, features(25.0)).shape == (10, 384)
     z = zero_features(75, 384)
     assert z.shape == (75, 384) and z.dtype == np.float32 and not z.any()

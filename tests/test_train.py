@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from helpers import make_dataset, train_toy
+from helpers import TOY_SPLITS, make_dataset, train_toy
 from safetensors import safe_open
 
 from facegen.bundle import load_bundle, read_metadata
@@ -108,7 +108,7 @@ def test_text_modalities_train_with_a_text_backend(tmp_path_factory, tmp_path):
 
 
 def test_half_bundle_and_batches(toy, tmp_path):
-    result = train_toy(toy, tmp_path / "h.safetensors", epochs=1, half=True, batch_size=3)
+    result = train_toy(toy, tmp_path / "h.safetensors", epochs=1, precision="fp16", batch_size=3)
     assert math.isfinite(result.best_loss)
     assert _weights(tmp_path / "h.safetensors")["model.fc_out.weight"].dtype == torch.float16
     assert load_bundle(tmp_path / "h.safetensors").model.fc_out.weight.dtype == torch.float32
@@ -169,9 +169,36 @@ def test_pca_output_layer_trains_in_coefficients_and_folds_into_the_papers_layer
 
 
 def test_pca_options_are_checked_before_work(toy, tmp_path):
-    with pytest.raises(FacegenError, match="need --output-layer pca"):
+    with pytest.raises(FacegenError, match="need the pca output layer"):
         train_toy(toy, tmp_path / "m.safetensors", lip_weight=1.0)
-    with pytest.raises(FacegenError, match="--basis 5000 needs more training frames"):
+    with pytest.raises(FacegenError, match="a basis of 5000 needs more training frames"):
         train_toy(toy, tmp_path / "m.safetensors", output="pca", basis=5000)
     with pytest.raises(FacegenError, match="unknown output layer"):
         train_toy(toy, tmp_path / "m.safetensors", output="half")
+
+
+def test_the_bundle_records_its_config_and_features(toy, tmp_path):
+    """The provenance holds the TrainConfig's settings, the header the feature settings (the text smoothing
+    window included); a checkpoint written before the window was a setting resumes (it had the default)."""
+    from facegen.train_config import TrainConfig
+
+    out = tmp_path / "c.safetensors"
+    train_toy(toy, out, epochs=1, seed=4, lr=2e-3, batch_size=2)
+    meta = read_metadata(out)
+    settings = {k: meta["provenance"][k] for k in ("seed", "lr", "batch_size", "output", "split")}
+    assert settings == {"seed": 4, "lr": 2e-3, "batch_size": 2, "output": "full",
+                        "split": TrainConfig(splits=TOY_SPLITS).splits.to_dict()}
+    assert meta["feature_config"]["text_window"] == [8, 7]
+    assert "basis" not in meta["provenance"] and "patience" not in meta["provenance"]
+
+    from safetensors.torch import load_file, save_file
+
+    path = default_checkpoint_dir(out) / CHECKPOINT
+    with safe_open(str(path), framework="pt") as f:
+        old = json.loads(f.metadata()["facegen_checkpoint"])
+    del old["signature"]["feature_config"]["text_window"]
+    save_file(load_file(str(path)), str(path), metadata={"facegen_checkpoint": json.dumps(old)})
+    resumed = train_toy(toy, out, epochs=2, seed=4, lr=2e-3, batch_size=2, resume=True)
+    assert resumed.epochs_run == 1 and resumed.epochs == 2
+    with pytest.raises(FacegenError, match="unknown precision"):
+        train_toy(toy, tmp_path / "p.safetensors", precision="fp8")

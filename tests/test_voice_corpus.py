@@ -107,6 +107,7 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
     from facegen.datasets.splits import Splits
     from facegen import animate
     from facegen.train import train
+    from facegen.train_config import TrainConfig
     from facegen.alignment_files import write_alignment
     from facegen.words import Word
 
@@ -117,8 +118,9 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
                     test_sentences="2")
     small = {"conv_channels": 16, "audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16,
              "lstm_dim": 16}
-    result = train(out, tmp_path / "phones.safetensors", modalities="audio", epochs=2, splits=splits, device="cpu",
-                   model_options=small, quiet=True, threads=1, output="pca", basis=8, phones=True, warn=None)
+    config = TrainConfig(modalities="audio", epochs=2, splits=splits, model_options=small, output="pca", basis=8,
+                         phones=True)
+    result = train(out, tmp_path / "phones.safetensors", config, device="cpu", quiet=True, threads=1, warn=None)
     assert result.train_sequences == 3
     from facegen.bundle import load_bundle
 

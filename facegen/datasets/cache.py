@@ -78,7 +78,7 @@ class FeatureCache:
         self.filters = np.ascontiguousarray(filters, np.float32)
         self.backend = backend
         filters_hash = hashlib.sha256(self.filters.tobytes()).hexdigest()
-        self._mel_key = [CACHE_VERSION, features.to_dict(), filters_hash]
+        self._mel_key = [CACHE_VERSION, features.mel_dict(), filters_hash]
 
     def _get(self, path: Path) -> np.ndarray | None:
         from safetensors.numpy import load_file
@@ -122,14 +122,14 @@ class FeatureCache:
             words_json = [[w.text, float(w.start), float(w.end)] for w in words]
             write_json(words_path, {"words": words_json})
         text_key = [CACHE_VERSION, self.backend.id, self.backend.dim, self.config.fps, mel.shape[0],
-                    words_json]
+                    words_json, list(self.config.text_window)]
         text_path = self.folder / f"{seq.name}.text-{digest(text_key)}.safetensors"
         text = self._get(text_path)
         if text is None:
             from facegen.words import Word
 
             words = [Word(t, s, e) for t, s, e in words_json]
-            text = text_features(words, self.backend, mel.shape[0], self.config.fps)
+            text = text_features(words, self.backend, mel.shape[0], self.config)
             self._put(text_path, text)
         return mel, text
 
