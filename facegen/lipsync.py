@@ -6,16 +6,15 @@ the distance between the eyeball centres / 6.3, as the rig (facegen.face.rig) me
 * lip aperture: the gap between the upper and lower mouth margin over the middle third of the mouth;
 * `lipsync_metrics`: aperture correlation (lag 0 and best lag), aperture ratio, crossed lips, bilabial
   closure, stillness outside speech and upper-face motion of a predicted animation against a reference;
-* `rig_reference`: the reference for any recording, facegen's rig driven by its phone timings;
+* the reference for any recording (facegen's rig driven by its phone timings) comes from
+  facegen.synth.reference.rig_reference;
 * `upper_face_response`: the upper-face motion of emotional words relative to neutral words.
 """
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,9 +22,6 @@ from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
 from facegen.face.regions import LIPS, LIPSYNC_REGIONS, UPPER_FACE
 from facegen.phonetics import check_alphabet, is_silence, phone_visemes
-
-if TYPE_CHECKING:
-    from facegen.face.rig import Rig
 
 MAX_LAG = 3  # frames searched either way for the best-lag aperture correlation
 OPEN_MM = 2.0  # reference aperture above which a frame counts as open (the face's rest gap is ~1 mm)
@@ -101,7 +97,8 @@ def aperture(vertices: np.ndarray, mesh: Mesh | FaceGeometry) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------- timings
 def _timing(item) -> tuple[str, float, float]:
-    """(name, start, end) of a phone or word: an object with .text/.start/.end or a tuple (name, start, end)."""
+    """(name, start, end) of a phone or word: an object with .text/.start/.end or a tuple (name, start,
+    end)."""
     if hasattr(item, "text"):
         return str(item.text), float(item.start), float(item.end)
     return str(item[0]), float(item[1]), float(item[2])
@@ -212,8 +209,8 @@ def lipsync_metrics(pred_vertices: np.ndarray, ref_vertices: np.ndarray, mesh: M
     ref = _frames(ref_vertices, geo, "the reference vertices")
     T = len(pred)
     if len(ref) != T:
-        raise FacegenError(f"the prediction has {T} frames but the reference {len(ref)}: animate the same audio "
-                           "at the same fps")
+        raise FacegenError(f"the prediction has {T} frames but the reference {len(ref)}: animate the same "
+                           "audio at the same fps")
     speech_given = speech is not None
     speech = np.ones(T, bool) if speech is None else np.asarray(speech, bool)
     if speech.shape != (T,):
@@ -296,36 +293,6 @@ def upper_face_response(neutral_vertices: np.ndarray, emotional_vertices: np.nda
     if neutral < STILL_MM:
         return 1.0 if emotional < STILL_MM else float("inf")
     return emotional / neutral
-
-
-# ----------------------------------------------------------------------------------------- reference
-def rig_reference(phones: Sequence, words: Sequence, num_frames: int, fps: float,
-                  mesh: Mesh | Rig | None = None, *, alphabet: str = "espeak",
-                  loudness: np.ndarray | None = None) -> np.ndarray:
-    """The reference animation [num_frames, V, 3] (float32) for a recording with these phone and word
-    timings (e.g. from forced alignment): facegen's rig with the neutral speaker style and no blinks.
-
-    `mesh`: the face (a Mesh, or a facegen.face.rig.Rig built on it to reuse across calls; default: the
-    committed neutral face, rigged once). `alphabet` ("espeak" mnemonics or "cmu" phones)
-    and `loudness` (the recording's facegen.synth.curves.loudness_envelope: prosody) go to the rig's
-    motion_curves; emotional words move the upper face as in the synthetic corpus."""
-    from facegen.face.rig import CHANNELS, Rig
-    from facegen.synth.curves import motion_curves
-
-    rig = _template_rig() if mesh is None else mesh if isinstance(mesh, Rig) else Rig(mesh)
-    curves = motion_curves(phones, words, int(num_frames), fps, rng=np.random.default_rng(0), alphabet=alphabet,
-                           loudness=loudness)
-    curves[:, CHANNELS.index("blink")] = 0.0
-    return rig.pose(curves)
-
-
-@functools.cache
-def _template_rig() -> Rig:
-    """The rig on the committed neutral face (facegen/face/templates/face.ply), built once."""
-    from facegen.face.rig import Rig
-    from facegen.face.template import load_template
-
-    return Rig(load_template())
 
 
 # -------------------------------------------------------------------------------------------- report

@@ -7,17 +7,17 @@ import pytest
 from helpers import rig_weights
 
 from facegen.errors import FacegenError
+from facegen.face.rig import JAW_MAX_ANGLE, Rig
 from facegen.lipsync import (
     FaceGeometry,
     aperture,
     bilabial_midpoints,
     format_lipsync,
     lipsync_metrics,
-    rig_reference,
     speech_mask,
     upper_face_response,
 )
-from facegen.face.rig import JAW_MAX_ANGLE, Rig
+from facegen.synth.reference import rig_reference
 from facegen.words import Word
 
 FPS = 25.0
@@ -140,8 +140,8 @@ def test_upper_face_motion(face, rig, talking):
     m = lipsync_metrics(brows, v, face, FPS, speech=speech)
     assert m["upper_face_speech_mm"] > m["upper_face_rest_mm"] > 0.1
     assert m["upper_face_speech_ratio"] == pytest.approx(3.0, rel=1e-3)  # brow_raise is a linear offset
-    assert upper_face_response(rig.pose(rig_weights(T, brow_raise=0.2)), rig.pose(rig_weights(T, brow_raise=0.6)),
-                               face) == pytest.approx(3.0, rel=1e-3)
+    low, high = rig.pose(rig_weights(T, brow_raise=0.2)), rig.pose(rig_weights(T, brow_raise=0.6))
+    assert upper_face_response(low, high, face) == pytest.approx(3.0, rel=1e-3)
 
 
 def test_emotional_words_raise_the_upper_face(face, rig):
@@ -195,8 +195,8 @@ def test_out_of_range_bilabials_are_dropped(face, talking):
 
 
 def test_refusals(face, grid_mesh, talking):
-    with pytest.raises(FacegenError, match="lacks the lip-sync regions mouth_upper_margin, mouth_lower_margin, "
-                                           "left_eyeball, right_eyeball:") as err:
+    with pytest.raises(FacegenError, match="lacks the lip-sync regions mouth_upper_margin, "
+                                           "mouth_lower_margin, left_eyeball, right_eyeball:") as err:
         aperture(grid_mesh.vertices[None], grid_mesh)
     assert "\n" not in str(err.value)
     v, speech, _ = talking
