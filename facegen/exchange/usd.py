@@ -88,9 +88,10 @@ def write(
     clips, one layer per usd_clips.CLIP_FRAMES frames in the folder `out.clips/` beside `out.usdc`, so that
     memory stays bounded (usd_clips.py); "never" always writes one file; a number N writes value clips of N
     frames whatever the length.
-    Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio`
-    is true, then the clip folder's files (rest layer, manifest, clip layers) when there are clips. `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated
-    to `clip.usda`) it is referenced, not overwritten.
+    Returns the asset's files: the USD file, then the WAV when the animation has audio and `write_audio` is
+    true, then the clip folder's files (rest layer, manifest, clip layers) when there are clips.
+    `audio_source` is the input audio file: when it is the sidecar itself (`clip.wav` animated to `clip.usda`)
+    it is referenced, not overwritten.
     """
     from pxr import Sdf, Usd
 

@@ -20,7 +20,8 @@ k)], times [(0, 0), (T-1, T-1)] (stage time = clip time), manifestAssetPath. usd
 USD through it) composes the clips into one animation: `points` has one sample per frame at 0..T-1.
 
 The folder is written as a temporary folder beside the target and renamed into place with the main file (one
-facegen.atomic.Transaction); a failed write leaves nothing, and rewriting a long clip replaces the whole folder.
+facegen.atomic.Transaction); a failed write leaves nothing, and rewriting a long clip replaces the whole
+folder.
 """
 
 from __future__ import annotations
@@ -171,7 +172,8 @@ def _save(layer, path: Path) -> None:
 
 def remove_stale(path: Path, transaction: Transaction) -> None:
     """When writing `path` as one file: remove, at the transaction's commit, the clip folder an earlier long
-    write of `path` left (it is recognised by its manifest), so that no outdated clips stay beside the asset."""
+    write of `path` left (it is recognised by its manifest), so that no outdated clips stay beside the
+    asset."""
     folder = folder_of(path)
     if folder.is_dir() and (folder / f"{path.stem}.manifest.usda").is_file():
         transaction.remove(folder)
