@@ -1,4 +1,4 @@
-"""What a training run makes, as data: `TrainConfig` (no torch: the CLI reads its defaults at start-up).
+"""What a training run makes, as data: `TrainConfig` (no torch or numpy: the CLI reads its defaults).
 
 `facegen train` takes its option defaults from it, `facegen.train.train` takes one, and the bundle's
 provenance is written from it (`provenance`). Where and how a run happens is not part of it and stays an
@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from facegen.bundle import PRECISIONS
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.model_config import FUSIONS, MODALITIES
@@ -62,6 +61,7 @@ class TrainConfig:
 
     def check(self) -> None:
         """Raise FacegenError for a setting no run can use (before any data is read)."""
+        from facegen.bundle import PRECISIONS  # numpy: not on the CLI's start-up path
         if self.modalities not in MODALITIES:
             raise FacegenError(f"unknown modalities {self.modalities!r}: choose one of "
                                f"{', '.join(MODALITIES)}", param="modalities")

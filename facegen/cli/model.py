@@ -8,6 +8,8 @@ from pathlib import Path
 import click
 
 from facegen.cli.options import DEVICE, WEIGHT, FiniteRange, split_options, splits
+from facegen.model_config import FUSIONS, MODALITIES
+from facegen.train_config import OUTPUT_LAYERS, TrainConfig
 
 
 @click.command()
@@ -47,35 +49,37 @@ def info(bundle, as_json):
 @click.argument("data", type=click.Path(file_okay=False))
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
               help="The model bundle to write.")
-@click.option("--text-backend", default="minilm", show_default=True,
+@click.option("--text-backend", default=TrainConfig.text_backend, show_default=True,
               help="minilm (offline default), gpt2 (the paper's), or a Hugging Face id / local folder.")
 @click.option("--text-model", type=click.Path(), help="Local folder with the text model's weights.")
-@click.option("--modalities", type=click.Choice(["both", "audio", "text"]), default="both", show_default=True)
-@click.option("--fusion", type=click.Choice(["tensor", "concat"]), default="tensor", show_default=True)
-@click.option("--epochs", type=click.IntRange(min=1), default=100, show_default=True)
-@click.option("--lr", type=FiniteRange(0, 10, min_open=True), default=1e-4, show_default=True)
-@click.option("--batch-size", type=click.IntRange(min=1), default=1, show_default=True)
-@click.option("--seed", default=0, show_default=True)
+@click.option("--modalities", type=click.Choice(MODALITIES), default=TrainConfig.modalities,
+              show_default=True)
+@click.option("--fusion", type=click.Choice(FUSIONS), default=TrainConfig.fusion, show_default=True)
+@click.option("--epochs", type=click.IntRange(min=1), default=TrainConfig.epochs, show_default=True)
+@click.option("--lr", type=FiniteRange(0, 10, min_open=True), default=TrainConfig.lr, show_default=True)
+@click.option("--batch-size", type=click.IntRange(min=1), default=TrainConfig.batch_size, show_default=True)
+@click.option("--seed", type=int, default=TrainConfig.seed, show_default=True)
 @click.option("--device", type=DEVICE, default="auto", show_default=True)
 @click.option("--resume", is_flag=True,
               help="Continue from the last checkpoint (after a kill or with more epochs).")
 @click.option("--checkpoint-dir", type=click.Path(file_okay=False), help="Default: OUTPUT's name + '.ckpt/'.")
-@click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default="fp32", show_default=True,
+@click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default=TrainConfig.precision,
+              show_default=True,
               help="How the bundle stores its weights.")
 @click.option("--threads", type=click.IntRange(1, 1024), help="CPU threads for torch (default: all cores).")
 @click.option("--strict", is_flag=True,
               help="Refuse to train when a sequence is missing or corrupt (default: skip it).")
-@click.option("--output-layer", "output_layer", type=click.Choice(["full", "pca"]), default="full",
+@click.option("--output-layer", "output_layer", type=click.Choice(OUTPUT_LAYERS), default=TrainConfig.output,
               show_default=True,
               help="full: the paper's FC 3V; pca: the same layer trained in a PCA basis of the training "
                    "motion.")
-@click.option("--basis", type=click.IntRange(min=1), default=64, show_default=True,
+@click.option("--basis", type=click.IntRange(min=1), default=TrainConfig.basis, show_default=True,
               help="Dimensions of the PCA basis (--output-layer pca).")
-@click.option("--lip-weight", type=WEIGHT, default=0.0, show_default=True,
+@click.option("--lip-weight", type=WEIGHT, default=TrainConfig.lip_weight, show_default=True,
               help="Extra loss on the lip vertices (pca only).")
-@click.option("--velocity-weight", type=WEIGHT, default=0.0, show_default=True,
+@click.option("--velocity-weight", type=WEIGHT, default=TrainConfig.velocity_weight, show_default=True,
               help="Loss on frame-to-frame motion (pca only).")
-@click.option("--upper-weight", type=WEIGHT, default=0.0, show_default=True,
+@click.option("--upper-weight", type=WEIGHT, default=TrainConfig.upper_weight, show_default=True,
               help="Extra loss on the upper-face vertices (pca only).")
 @click.option("--patience", type=click.IntRange(min=1),
               help="Stop after this many epochs without a better validation loss.")
@@ -93,12 +97,14 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
     from facegen.train import train as run
 
     chosen = splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
-    result = run(data, output, text_backend=text_backend, text_model_path=text_model, modalities=modalities,
-                 fusion=fusion, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, device=device,
-                 resume=resume, splits=chosen, checkpoint_dir=checkpoint_dir, precision=precision,
-                 threads=threads, on_bad="fail" if strict else "skip", quiet=quiet, output=output_layer,
-                 basis=basis, lip_weight=lip_weight, velocity_weight=velocity_weight,
-                 upper_weight=upper_weight, patience=patience, phones=phones)
+    config = TrainConfig(text_backend=text_backend, modalities=modalities, fusion=fusion, epochs=epochs,
+                         lr=lr, batch_size=batch_size, seed=seed, splits=chosen, precision=precision,
+                         output=output_layer, basis=basis, lip_weight=lip_weight,
+                         velocity_weight=velocity_weight, upper_weight=upper_weight, patience=patience,
+                         phones=phones)
+    result = run(data, output, config, device=device, threads=threads, resume=resume,
+                 checkpoint_dir=checkpoint_dir, text_model_path=text_model,
+                 on_bad="fail" if strict else "skip", quiet=quiet)
     click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs,
                            "best_epoch": result.best_epoch, "best_loss": result.best_loss,
                            "seconds": round(result.seconds, 1),
