@@ -14,6 +14,10 @@ the default model's face (23,370 vertices) as a points .usdc from a FrameStream 
 layer over smooth random decoder states: no audio runs through the network), then validates it, and prints
 the peak resident memory (VmHWM) after each step. Run it once per `--usd-clips` value, each in a new process:
 `never` is the one-file layer (the writer before value clips), `auto` the value clips.
+
+Write speed of points USD (`--usdc-throughput [--runs N]`): a minute (1500 frames at 25 fps) on the BIWI
+template's 23,370 vertices (random ones without the dataset) written as .usdc, and the same frames as .npy
+(the same bytes, raw: the I/O floor); prints frames/s of each (tests/test_exchange_usd.py checks the values).
 """
 
 from __future__ import annotations
@@ -98,6 +102,42 @@ def usd_long(minutes: float, clips: str | None) -> None:
                       "memory_ok": wrote <= 2048}))
 
 
+def usdc_throughput(runs: int) -> None:
+    """Time writing a minute of points as .usdc and as .npy; print frames/s (best of `runs`) and the size."""
+    from facegen.animation import Animation
+    from facegen.exchange import write_animation
+    from facegen.face.mesh import Mesh, read_mesh
+
+    ply = Path(__file__).resolve().parents[2] / "shared" / "biwi" / "BIWI.ply"
+    if ply.is_file():
+        mesh = read_mesh(ply)
+    else:  # no BIWI template here: a random face of the same size
+        rng = np.random.default_rng(0)
+        mesh = Mesh(rng.standard_normal((23370, 3)).astype(np.float32),
+                    rng.integers(0, 23370, (46068, 3)).astype(np.int32))
+    frames, fps, rate = 1500, 25, 16000
+    rng = np.random.default_rng(1)
+    noise = (0.002 * rng.standard_normal((frames, 1, 3))).astype(np.float32)
+    anim = Animation(mesh.vertices[None] + noise + 0.001 * np.arange(frames, dtype=np.float32)[:, None, None],
+                     mesh.faces, fps, mesh.vertices, np.zeros(frames * rate // fps, np.float32), rate)
+    best: dict[str, float] = {}
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as folder:
+        for run in range(runs):
+            for name, options in ((".usdc", {}), (".npy", {"write_audio": False})):
+                out = Path(folder) / f"long{name}"
+                start = time.perf_counter()
+                write_animation(anim, out, **options)
+                seconds = time.perf_counter() - start
+                best[name] = min(best.get(name, seconds), seconds)
+                size = out.stat().st_size
+                out.unlink()
+                print(f"run {run}: {name} {frames} frames x {mesh.num_vertices} vertices in {seconds:.2f} s = "
+                      f"{frames / seconds:.0f} frames/s ({size / 1e6:.0f} MB)", flush=True)
+    print(json.dumps({"benchmark": "usdc_throughput", "frames": frames, "vertices": mesh.num_vertices,
+                      "usdc_frames_per_second": round(frames / best[".usdc"]),
+                      "npy_frames_per_second": round(frames / best[".npy"])}))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0)
@@ -109,7 +149,11 @@ def main() -> None:
     parser.add_argument("--template", help="the template mesh of --npy")
     parser.add_argument("--usd-long", type=float, metavar="MINUTES", help="the long-clip USD memory case")
     parser.add_argument("--usd-clips", help="with --usd-long: auto, never or frames per clip (default: the writer's)")
+    parser.add_argument("--usdc-throughput", action="store_true", help="time a minute of points .usdc vs .npy")
     args = parser.parse_args()
+    if args.usdc_throughput:
+        usdc_throughput(args.runs)
+        return
     if args.usd_long:
         usd_long(args.usd_long, args.usd_clips)
         return

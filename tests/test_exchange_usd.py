@@ -1,4 +1,4 @@
-"""facegen.exchange: USD and .npy writers/readers, the WAV sidecar, atomic writes, throughput."""
+"""facegen.exchange: USD and .npy writers/readers, the WAV sidecar, atomic writes, a minute-long clip."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import importlib
 import inspect
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -324,29 +323,24 @@ def test_biwi_template_usd(tmp_path, biwi_template):
     np.testing.assert_array_equal(back.vertices, anim.vertices)
 
 
-def test_usdc_write_throughput(tmp_path, request):
-    """1500 frames x 23,370 vertices (a minute at 25 fps): prints frames/s; no timing assert."""
+def test_usdc_writes_a_minute(tmp_path, request):
+    """1500 frames x 23,370 vertices (a minute at 25 fps): every frame is a time sample with its values (the
+    write speed is measured by benchmarks/bench_export.py --usdc-throughput)."""
     try:
         mesh = request.getfixturevalue("biwi_template")
     except pytest.skip.Exception:
         rng = np.random.default_rng(0)
-        mesh = Mesh(rng.standard_normal((23370, 3)).astype(np.float32), rng.integers(0, 23370, (46068, 3)).astype(np.int32))
+        mesh = Mesh(rng.standard_normal((23370, 3)).astype(np.float32),
+                    rng.integers(0, 23370, (46068, 3)).astype(np.int32))
     frames = 1500
     rng = np.random.default_rng(1)
     noise = (0.002 * rng.standard_normal((frames, 1, 3))).astype(np.float32)
     anim = Animation(mesh.vertices[None] + noise + 0.001 * np.arange(frames, dtype=np.float32)[:, None, None],
                      mesh.faces, FPS, mesh.vertices, np.zeros(frames * SR // 25, np.float32), SR)
     out = tmp_path / "long.usdc"
-    start = time.perf_counter()
     write_animation(anim, out)
-    seconds = time.perf_counter() - start
-    start = time.perf_counter()
-    write_animation(anim, tmp_path / "long.npy", write_audio=False)  # the same bytes, raw: the I/O floor
-    raw = time.perf_counter() - start
-    print(f"\n.usdc write: {frames} frames x {mesh.num_vertices} vertices in {seconds:.2f} s = "
-          f"{frames / seconds:.0f} frames/s ({out.stat().st_size / 1e6:.0f} MB); "
-          f".npy of the same frames: {frames / raw:.0f} frames/s")
     stage = Usd.Stage.Open(str(out))
     points = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")).GetPointsAttr()
     assert points.GetNumTimeSamples() == frames
-    np.testing.assert_array_equal(np.asarray(points.Get(1234)), anim.vertices[1234])
+    for frame in (0, 1234, frames - 1):
+        np.testing.assert_array_equal(np.asarray(points.Get(frame)), anim.vertices[frame])
