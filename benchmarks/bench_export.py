@@ -131,8 +131,8 @@ def usdc_throughput(runs: int) -> None:
                 best[name] = min(best.get(name, seconds), seconds)
                 size = out.stat().st_size
                 out.unlink()
-                print(f"run {run}: {name} {frames} frames x {mesh.num_vertices} vertices in {seconds:.2f} s = "
-                      f"{frames / seconds:.0f} frames/s ({size / 1e6:.0f} MB)", flush=True)
+                print(f"run {run}: {name} {frames} frames x {mesh.num_vertices} vertices in {seconds:.2f} s "
+                      f"= {frames / seconds:.0f} frames/s ({size / 1e6:.0f} MB)", flush=True)
     print(json.dumps({"benchmark": "usdc_throughput", "frames": frames, "vertices": mesh.num_vertices,
                       "usdc_frames_per_second": round(frames / best[".usdc"]),
                       "npy_frames_per_second": round(frames / best[".npy"])}))
@@ -149,7 +149,8 @@ def main() -> None:
     parser.add_argument("--template", help="the template mesh of --npy")
     parser.add_argument("--usd-long", type=float, metavar="MINUTES", help="the long-clip USD memory case")
     parser.add_argument("--usd-clips", help="with --usd-long: auto, never or frames per clip (default: the writer's)")
-    parser.add_argument("--usdc-throughput", action="store_true", help="time a minute of points .usdc vs .npy")
+    parser.add_argument("--usdc-throughput", action="store_true",
+                        help="time a minute of points .usdc vs .npy")
     args = parser.parse_args()
     if args.usdc_throughput:
         usdc_throughput(args.runs)

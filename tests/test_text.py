@@ -320,8 +320,8 @@ def test_the_smoothing_window_is_the_feature_configs():
     words = [W("a", 0.0, 0.3), W("b", 0.5, 0.9), W("c", 1.2, 1.5)]
     vectors = rng.normal(size=(3, 4)).astype(np.float32)
     raw = frame_features(words, vectors, 40, features(25.0, (0, 0)))
-    np.testing.assert_allclose(frame_features(words, vectors, 40, features(25.0, (3, 1))), naive_smooth(raw, 3, 1),
-                               atol=1e-6)
+    smoothed = frame_features(words, vectors, 40, features(25.0, (3, 1)))
+    np.testing.assert_allclose(smoothed, naive_smooth(raw, 3, 1), atol=1e-6)
     np.testing.assert_allclose(frame_features(words, vectors, 40, FeatureConfig()), naive_smooth(raw, 8, 7),
                                atol=1e-6)
     assert FeatureConfig().text_window == (8, 7)

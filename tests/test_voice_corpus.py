@@ -104,11 +104,11 @@ def test_missing_voices_name_the_packages(monkeypatch, tmp_path):
 def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tmp_path):
     """A model with the phone stream: trained on the corpus's phone timings; at inference its phones come
     from pocketsphinx's phone alignment of --text, or from an alignment file that lists them."""
-    from facegen.datasets.splits import Splits
     from facegen import animate
+    from facegen.alignment_files import write_alignment
+    from facegen.datasets.splits import Splits
     from facegen.train import train
     from facegen.train_config import TrainConfig
-    from facegen.alignment_files import write_alignment
     from facegen.words import Word
 
     out, manifest = corpus
@@ -118,9 +118,10 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
                     test_sentences="2")
     small = {"conv_channels": 16, "audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16,
              "lstm_dim": 16}
-    config = TrainConfig(modalities="audio", epochs=2, splits=splits, model_options=small, output="pca", basis=8,
-                         phones=True)
-    result = train(out, tmp_path / "phones.safetensors", config, device="cpu", quiet=True, threads=1, warn=None)
+    config = TrainConfig(modalities="audio", epochs=2, splits=splits, model_options=small, output="pca",
+                         basis=8, phones=True)
+    result = train(out, tmp_path / "phones.safetensors", config, device="cpu", quiet=True, threads=1,
+                   warn=None)
     assert result.train_sequences == 3
     from facegen.bundle import load_bundle
 
