@@ -24,7 +24,8 @@ from facegen.runtime import ProcessPool, cores, process_pool, set_threads
 
 ENGINES = ("local", "ray")
 # What the local engine's worker processes import before they are forked (once, not in every worker): torch,
-# USD, pocketsphinx and the aligner's decoders (worker_preload), the text model's code and the pipeline around them.
+# USD, pocketsphinx and the aligner's decoders (worker_preload), the text model's code and the pipeline around
+# them.
 # Nothing here may start threads (torch and USD start theirs on first use, not on import).
 PRELOAD = ["torch", *USD_LIBRARIES, "pocketsphinx",
            "safetensors.torch", "tokenizers", "facegen.engines", "facegen.animator", "facegen.worker_preload",
@@ -114,7 +115,8 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
     # made from a thread, and this one aligns meanwhile. `sent`: the chunks of `queue` submitted so far.
     sent = min(workers + 1, len(queue))
     failed: list[BaseException] = []
-    starter = threading.Thread(target=_submit, args=(pool, queue[:sent], batch_size, pending, failed), daemon=True)
+    starter = threading.Thread(target=_submit, args=(pool, queue[:sent], batch_size, pending, failed),
+                               daemon=True)
     starter.start()
     try:
         while starter.is_alive() and _align_next(to_align, sent):
@@ -123,7 +125,7 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
         if failed:
             raise failed[0]
         while sent < len(queue) or pending:
-            while sent < len(queue) and len(pending) <= workers:  # every worker busy, one chunk ready to start
+            while sent < len(queue) and len(pending) <= workers:  # every worker busy, one chunk ready
                 _submit(pool, [queue[sent]], batch_size, pending)
                 sent += 1
             aligned = _align_next(to_align, sent)
@@ -137,7 +139,7 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
                     results = [JobResult(job, error=why) for job in chunk]
                 for result in results:
                     on_result(result)
-    except BaseException:  # Ctrl-C, SIGTERM, an error in on_result: stop the workers now, not after their chunks
+    except BaseException:  # Ctrl-C, SIGTERM, an error in on_result: stop the workers now, not after a chunk
         starter.join()  # its workers too
         pool.stop()
         raise
@@ -147,7 +149,7 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
 
 def _submit(pool: ProcessPool, chunks_: list[list[Job]], batch_size: int, pending: dict,
             failed: list[BaseException] | None = None) -> None:
-    """Submit each chunk to the pool, into `pending` (future -> chunk); an error goes to `failed` when given."""
+    """Submit each chunk to the pool, into `pending` (future -> chunk); an error goes to `failed` if given."""
     try:
         for chunk in chunks_:
             pending[pool.submit(_run_local, chunk, batch_size)] = chunk
@@ -158,8 +160,8 @@ def _submit(pool: ProcessPool, chunks_: list[list[Job]], batch_size: int, pendin
 
 
 def _align_next(to_align: list[tuple[int, Job, bool]], sent: int) -> bool:
-    """Force-align the last job of `to_align` whose chunk (its index in the queue) has not been submitted yet (the
-    chunks before `sent` have gone to the workers, which align their own); False when there is none."""
+    """Force-align the last job of `to_align` whose chunk (its index in the queue) has not been submitted yet
+    (the chunks before `sent` have gone to the workers, which align their own); False when there is none."""
     while to_align and to_align[-1][0] < sent:
         to_align.pop()
     if not to_align:
@@ -170,8 +172,9 @@ def _align_next(to_align: list[tuple[int, Job, bool]], sent: int) -> bool:
 
 
 def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[int, Job, bool]]:
-    """(chunk index, job, whether the model needs its phones too) for the jobs this process can force-align, in
-    queue order (taken from the end): those whose words come from forced alignment, when the model uses them."""
+    """(chunk index, job, whether the model needs its phones too) for the jobs this process can force-align,
+    in queue order (taken from the end): those whose words come from forced alignment, when the model uses
+    them."""
     from facegen.pipeline import force_aligned, forced_alignment_of
 
     needs = forced_alignment_of(model)
@@ -187,8 +190,8 @@ class _RayWorker(Worker):
 
 def run_ray(jobs: Sequence[Job], *, workers: int | None, address: str | None, model: str | None, device: str,
             text_model: str | None, batch_size: int, on_result: OnResult) -> None:
-    """Run `jobs` as Ray actor tasks: on the cluster at `address` (host:port, ray://host:port or auto), else on
-    the Ray instance this process already joined, else on a local instance started here (127.0.0.1, one CPU
+    """Run `jobs` as Ray actor tasks: on the cluster at `address` (host:port, ray://host:port or auto), else
+    on the Ray instance this process already joined, else on a local instance started here (127.0.0.1, one CPU
     per worker). `workers`: actors to start (default: the cluster's CPUs). Every path must be the same on
     every node (a shared file system)."""
     ray = _import_ray()
@@ -214,8 +217,8 @@ def run_ray(jobs: Sequence[Job], *, workers: int | None, address: str | None, mo
                     idle.append(worker)
                 except ray.exceptions.RayError as exc:  # the actor died (or its node): only this chunk fails
                     why = " ".join(str(exc).split())[:200]
-                    results = [JobResult(job, error=f"the Ray worker failed ({why}): rerun the batch to redo this "
-                                                    "item") for job in chunk]
+                    error = f"the Ray worker failed ({why}): rerun the batch to redo this item"
+                    results = [JobResult(job, error=error) for job in chunk]
             for result in results:
                 on_result(result)
     finally:

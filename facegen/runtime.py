@@ -163,7 +163,8 @@ def progress_bar(iterable: Iterable | None = None, *, total: int | None = None, 
     if enabled and stderr_is_terminal():
         from tqdm import tqdm
 
-        return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave, file=sys.stderr, dynamic_ncols=True)
+        return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave, file=sys.stderr,
+                    dynamic_ncols=True)
     return _LogProgress(iterable, desc, unit, say_stderr if enabled and leave else silent)
 
 
@@ -231,7 +232,7 @@ def stop_on_signals() -> None:
         if hasattr(signal, name):
             try:
                 signal.signal(getattr(signal, name), raise_terminated)
-            except ValueError:  # not the main thread (facegen.cli.main called from a thread): keep the default
+            except ValueError:  # not the main thread (facegen.cli.main called from a thread): the default
                 return
 
 
