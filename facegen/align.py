@@ -232,7 +232,8 @@ def _free_gaps(pcm: bytes, n_frames: int, cmn: str) -> np.ndarray | None:
 def _mismatch(detail: str) -> FacegenError:
     return FacegenError(f"the transcript does not match the speech ({detail}): check the transcript; the aligner "
                         "knows English only, so for speech in another language align it with a tool for that "
-                        "language (e.g. the Montreal Forced Aligner) and pass --alignment FILE")
+                        "language (e.g. the Montreal Forced Aligner) and pass its word timings",
+                        param="alignment")
 
 
 def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray, free: np.ndarray) -> None:
@@ -299,7 +300,7 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
            with_phones: bool) -> tuple[list[Word], list[Phone]]:
     entries = normalize_transcript(transcript)
     if not entries:
-        raise FacegenError('the transcript is empty: pass the words spoken in the audio (e.g. --text "...")')
+        raise FacegenError("the transcript is empty: pass the words spoken in the audio", param="text")
     check_word_rate(len(entries), len(audio) / sample_rate, "the transcript")
     audio = _pcm16k(audio, sample_rate)
     pcm = _pcm_bytes(audio)

@@ -36,13 +36,14 @@ class Aligned:
     words: list | None = None
     phones: list | None = None
     error: str | None = None
+    error_param: str | tuple[str, ...] | None = None  # the parameter the FacegenError names
     seconds: float = 0.0
     cpu_seconds: float = 0.0
 
     def result(self) -> tuple[list, list | None]:
         """(words, phones or None) as align gives them; raises its FacegenError."""
         if self.error is not None:
-            raise FacegenError(self.error)
+            raise FacegenError(self.error, param=self.error_param)
         PROFILE.add("alignment_in_parallel", self.seconds)
         return self.words, self.phones
 
@@ -69,7 +70,7 @@ def align_file(audio: str | os.PathLike, text: str, with_phones: bool) -> Aligne
             words, phones = align.align(samples, rate, text), None
         found = Aligned(words, phones)
     except FacegenError as exc:
-        found = Aligned(error=str(exc))
+        found = Aligned(error=str(exc), error_param=exc.param)
     found.seconds, found.cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
     return found
 

@@ -149,7 +149,8 @@ def read_metadata(path: str | os.PathLike) -> dict:
 
     path = Path(path)
     if not path.is_file():
-        raise FacegenError(f"model bundle {path} does not exist: pass --model PATH to a .safetensors bundle")
+        raise FacegenError(f"model bundle {path} does not exist: pass the path of a .safetensors bundle",
+                           param="bundle")
     try:
         with safe_open(str(path), framework="numpy") as f:
             raw = (f.metadata() or {}).get("facegen")
@@ -183,7 +184,7 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
         if not path.is_file():
             raise FacegenError(
                 "the built-in default model is missing from this installation: reinstall facegen "
-                "or pass --model PATH"
+                "or pass a model bundle", param="bundle"
             )
     path = Path(path)
     meta = read_metadata(path)
@@ -201,7 +202,8 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
                         if v.is_floating_point() and not torch.isfinite(torch.sum(v, dtype=torch.float64)))
         if broken:
             raise FacegenError(f"model bundle {path} has NaN or infinite weights ({', '.join(broken[:3])}"
-                               f"{' ...' if len(broken) > 3 else ''}): re-train it (a lower --lr) or re-export it")
+                               f"{' ...' if len(broken) > 3 else ''}): re-train it (a lower learning rate) "
+                               "or re-export it")
         model.load_state_dict(state, assign=True)
         regions = {k[len("region."):]: v.numpy() for k, v in tensors.items() if k.startswith("region.")}
         template = Mesh(tensors["template.vertices"].numpy(), tensors["template.faces"].numpy(), regions)

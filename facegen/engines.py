@@ -227,7 +227,8 @@ def run_ray(jobs: Sequence[Job], *, workers: int | None, address: str | None, mo
 
 
 def check_ray(address: str | None) -> None:
-    """Refuse, before any work, `--engine ray` without Ray installed or with an address that does not answer."""
+    """Refuse, before any work, the ray engine without Ray installed or with an address that does not
+    answer."""
     _import_ray()
     if address is not None:
         check_address(address)
@@ -237,8 +238,8 @@ def _import_ray():
     try:
         import ray
     except ImportError as exc:
-        raise FacegenError("--engine ray needs Ray, which is not installed: pip install 'facegen[ray]' "
-                           "(or use --engine local)") from exc
+        raise FacegenError("the ray engine needs Ray, which is not installed: pip install 'facegen[ray]', "
+                           "or use the local engine", param="engine") from exc
     return ray
 
 
@@ -249,13 +250,13 @@ def check_address(address: str, timeout: float = 5.0) -> None:
     hostport = address.split("://", 1)[-1].rstrip("/")
     host, _, port = hostport.rpartition(":")
     if not host or not port.isdigit():
-        raise FacegenError(f"--ray-address {address!r} is not host:port (e.g. 10.0.0.5:6379 or "
-                           "ray://10.0.0.5:10001)")
+        raise FacegenError(f"the Ray address {address!r} is not host:port, e.g. 10.0.0.5:6379 or "
+                           "ray://10.0.0.5:10001", param="ray_address")
     try:
         socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
     except OSError as exc:
-        raise FacegenError(f"cannot reach the Ray cluster at {address} ({exc.strerror or exc}): start it with "
-                           "`ray start --head` or fix --ray-address") from exc
+        raise FacegenError(f"cannot reach the Ray cluster at {address} ({exc.strerror or exc}): start it "
+                           "with `ray start --head` or fix the address", param="ray_address") from exc
 
 
 def _connect(ray, address: str | None, workers: int | None) -> bool:
@@ -273,5 +274,6 @@ def _connect(ray, address: str | None, workers: int | None) -> bool:
         ray.init(address=address, **quiet)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         raise FacegenError(f"cannot join the Ray cluster at {address} ({' '.join(str(exc).split())[:200]}): "
-                           "check --ray-address and that the cluster's Ray version matches") from exc
+                           "check the address and that the cluster's Ray version matches",
+                           param="ray_address") from exc
     return True

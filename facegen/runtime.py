@@ -131,11 +131,12 @@ def select_device(device: str = "auto"):
 
     name = str(device).strip().lower()
     if name not in DEVICES and not name.startswith("cuda:"):
-        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda")
+        raise FacegenError(f"unknown device {device!r}: choose auto, cpu or cuda", param="device")
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name.startswith("cuda") and not torch.cuda.is_available():
-        raise FacegenError(f"--device {name} was asked for but torch sees no CUDA GPU: use --device cpu (or auto)")
+        raise FacegenError(f"device {name} was asked for but torch sees no CUDA GPU: use cpu or auto",
+                           param="device")
     return torch.device(name)
 
 

@@ -26,7 +26,7 @@ def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
 
 def _check_transcript(text: str) -> None:
     if not text.strip():
-        raise FacegenError("the transcript is empty: pass the words spoken with --text or --text-file")
+        raise FacegenError("the transcript is empty: pass the words spoken", param="text")
 
 
 def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
@@ -76,7 +76,8 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
         phones = read_phones(alignment)
         if phones is None:
             raise FacegenError(f"this model needs phone timings but {alignment} has none: write it with "
-                               "`facegen align --phones`, or pass --text")
+                               "`facegen align --phones`, or pass the transcript",
+                               param=("alignment", "text"))
         return words, FILE, phone_frames(phones, num_frames, fps)
     if text is not None and not no_text:
         _check_transcript(text)

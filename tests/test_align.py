@@ -181,9 +181,10 @@ def test_mismatched_transcript_is_an_error(corpus, case):
     other = corpus[4][0]
     transcript = {"other sentence": other, "half of the words": " ".join(text.split()[:6]),
                   "extra words": text + " " + other}[case]
-    expected = r"does not match the speech.*check the transcript.*--alignment FILE"
-    with pytest.raises(FacegenError, match=expected):
+    expected = r"does not match the speech.*check the transcript.*pass its word timings"
+    with pytest.raises(FacegenError, match=expected) as err:
         align(padded(speech), speech.sample_rate, transcript)
+    assert err.value.param == "alignment"
 
 
 def test_a_small_transcript_error_is_tolerated(corpus):

@@ -204,8 +204,9 @@ def test_fixed_and_per_frame_targets(tmp_path, grid_mesh):
     assert max_distance(usdskel_points(stage, 7.0), anim.vertices[7]) <= 1e-6 * grid_mesh.size
 
     long = rich_animation(grid_mesh, frames=MAX_FRAME_TARGETS + 1)
-    with pytest.raises(FacegenError, match="--morph-targets"):
+    with pytest.raises(FacegenError, match="morph targets") as err:
         write_animation(long, tmp_path / "long.usdc", mode="blendshapes", morph_targets="all")
+    assert err.value.param == "morph_targets"
     assert not (tmp_path / "long.usdc").exists() and not (tmp_path / "long.wav").exists()
 
 

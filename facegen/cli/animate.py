@@ -18,7 +18,7 @@ from facegen.cli.options import (
 from facegen.exchange import extensions
 
 
-@click.command(cls=Command)
+@click.command(cls=Command, given_by={"path": ("output",)})  # the written file
 @click.argument("audio", type=click.Path(dir_okay=False))
 @click.option("--text", "-t", help="The transcript (words spoken).")
 @click.option("--text-file", type=click.Path(dir_okay=False), help="A UTF-8 file with the transcript.")

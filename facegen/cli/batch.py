@@ -6,10 +6,11 @@ import sys
 
 import click
 
+from facegen.cli.command import Command
 from facegen.cli.options import DEVICE
 
 
-@click.command()
+@click.command(cls=Command)
 @click.argument("manifest", type=click.Path(dir_okay=False))
 @click.option("--output-dir", "-o", required=True, type=click.Path(file_okay=False),
               help="Folder for the outputs, the reports (report.json, JUnit report.xml) and the run state.")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from facegen.cli.command import Command
 from facegen.cli.options import FPS, progress
 from facegen.errors import FacegenError
 
@@ -11,6 +12,9 @@ from facegen.errors import FacegenError
 @click.group()
 def data():
     """Datasets: import the raw BIWI release, build the synthetic corpus."""
+
+
+data.command_class = Command  # its subcommands say library errors with their flags too
 
 
 @data.command("import-biwi")

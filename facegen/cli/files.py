@@ -7,11 +7,12 @@ from pathlib import Path
 
 import click
 
+from facegen.cli.command import Command
 from facegen.cli.options import FPS, FiniteRange
 from facegen.errors import FacegenError
 
 
-@click.command()
+@click.command(cls=Command, given_by={"template": ("model", "template")})
 @click.argument("input_file", metavar="IN", type=click.Path(dir_okay=False))
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False), help="The video (.mp4).")
 @click.option("--compare", type=click.Path(dir_okay=False),
@@ -47,7 +48,7 @@ def render(input_file, output, compare, model, template, fps, size, views, error
     click.echo(str(result.path))
 
 
-@click.command()
+@click.command(cls=Command)
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--model", "-m", type=click.Path(dir_okay=False), help="Check against this bundle's template.")
 @click.option("--template", type=click.Path(dir_okay=False), help="Check against this mesh (PLY/OBJ).")

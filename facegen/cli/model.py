@@ -7,12 +7,13 @@ from pathlib import Path
 
 import click
 
+from facegen.cli.command import Command
 from facegen.cli.options import DEVICE, WEIGHT, FiniteRange, split_options, splits
 from facegen.model_config import FUSIONS, MODALITIES
 from facegen.train_config import OUTPUT_LAYERS, TrainConfig
 
 
-@click.command()
+@click.command(cls=Command)
 @click.argument("bundle", required=False, type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the metadata as JSON.")
 def info(bundle, as_json):
@@ -34,8 +35,8 @@ def info(bundle, as_json):
         f"text backend   {meta['text_backend']['id']} ({meta['text_backend']['dim']}-d)",
         f"audio          {feat['n_mels']} mel bands, {feat['sample_rate']} Hz, {feat['fps']:g} fps",
         f"speakers       {', '.join(f'{i}={s}' for i, s in enumerate(meta['speakers']))}",
-        f"topology       {topo['num_vertices']} vertices, {topo['num_faces']} faces, "
-        f"fingerprint {topo['fingerprint']}",
+        (f"topology       {topo['num_vertices']} vertices, {topo['num_faces']} faces, "
+         f"fingerprint {topo['fingerprint']}"),
         f"regions        {regions or 'none'}",
     ]
     for k, v in meta.get("provenance", {}).items():
@@ -45,7 +46,7 @@ def info(bundle, as_json):
     click.echo("\n".join(lines))
 
 
-@click.command()
+@click.command(cls=Command, given_by={"output": ("output_layer",)})  # train(output=...) is the layer
 @click.argument("data", type=click.Path(file_okay=False))
 @click.option("--output", "-o", required=True, type=click.Path(dir_okay=False),
               help="The model bundle to write.")
@@ -111,7 +112,7 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
                            "curves": str(result.curves_csv), "skipped": len(result.skipped)}))
 
 
-@click.command()
+@click.command(cls=Command)
 @click.argument("bundle", type=click.Path(dir_okay=False))
 @click.argument("data", type=click.Path(file_okay=False))
 @click.option("--split", type=click.Choice(["test-a", "test-b", "val", "train"]), default="test-a",

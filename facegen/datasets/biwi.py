@@ -132,7 +132,7 @@ class Dataset:
             self.cache_dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise FacegenError(f"cannot create the cache folder {self.cache_dir} ({exc.strerror}): "
-                               "pass --cache-dir to a writable folder") from exc
+                               "pass a writable cache folder", param="cache_dir") from exc
         self.skipped: list[tuple[str, str]] = []  # (sequence, reason)
         self._vertex_index_dirty = False
 

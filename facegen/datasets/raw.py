@@ -257,7 +257,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
         for stem, region in COMMUNITY_FILES.items():
             src = Path(regions) / f"{stem}.txt"
             if not src.is_file():
-                raise FacegenError(f"{src} is missing: pass the folder with lve.txt and fdd.txt as --regions")
+                raise FacegenError(f"{src} is missing: pass the folder with lve.txt and fdd.txt as the regions",
+                                   param="regions")
             idx = read_region(src)
             if idx.size and (idx.min() < 0 or idx.max() >= first.num_vertices):
                 raise FacegenError(f"{src} has vertex indices outside the {first.num_vertices} vertices "

@@ -67,7 +67,8 @@ class Splits:
         for name in ("train_sentences", "val_sentences", "test_sentences"):
             object.__setattr__(self, name, parse_numbers(getattr(self, name)))
         if not self.train_subjects:
-            raise FacegenError("no training subjects: give at least one, e.g. --train-subjects 'F2 F3'")
+            raise FacegenError("no training subjects: give at least one, e.g. 'F2 F3'",
+                               param="train_subjects")
         both = set(self.train_subjects) & set(self.test_subjects)
         if both:
             raise FacegenError(f"subjects {' '.join(sorted(both))} are both training and test-b subjects: "

@@ -54,9 +54,10 @@ def writer_basis(
     (see pca.morph_basis) and do not apply to the ARKit rig, whose 52 shapes are fixed."""
     check_rig(rig)
     if rig == "arkit":
-        given = [n for n, v in (("--morph-targets", morph_targets), ("--tolerance", tolerance)) if v is not None]
+        given = [n for n, v in (("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None]
         if given:
-            raise FacegenError(f"{' and '.join(given)} size the PCA basis: drop them with --rig arkit")
+            raise FacegenError(f"{' and '.join(n.replace('_', ' ') for n in given)} size the PCA basis: drop "
+                               "them with the arkit rig", param=(*given, "rig"))
         return _arkit_basis(anim)
     return _pca_basis(anim, morph_targets, DEFAULT_TOLERANCE if tolerance is None else float(tolerance))
 

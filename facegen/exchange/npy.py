@@ -60,7 +60,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     """Read a [T, 3V] .npy file with the template's faces; the WAV sidecar beside it becomes the audio."""
     if template is None:
         raise FacegenError(
-            f"{Path(path).name} stores only vertex positions: pass the template mesh (--template)"
+            f"{Path(path).name} stores only vertex positions: pass the template mesh", param="template"
         )
     data = load_frames(path)
     num_vertices = data.shape[1] // 3

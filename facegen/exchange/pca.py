@@ -81,9 +81,10 @@ def parse_morph_targets(value: int | str | None) -> int | str | None:
     else:
         k = None
     if k is None:
-        raise FacegenError(f"--morph-targets takes a number of targets or 'all', got {value!r}")
+        raise FacegenError(f"morph targets take a number of targets or 'all', got {value!r}",
+                           param="morph_targets")
     if k < 1:
-        raise FacegenError(f"--morph-targets must be a whole number >= 1, got {k}")
+        raise FacegenError(f"morph targets must be a whole number >= 1, got {k}", param="morph_targets")
     return k
 
 
@@ -167,7 +168,8 @@ def frame_basis(anim: Animation, tolerance: float | None = None, sparse: bool = 
     if T > MAX_FRAME_TARGETS:
         raise FacegenError(
             f"one morph target per frame ('all') is for clips of at most {MAX_FRAME_TARGETS} frames, and this "
-            f"one has {T}: {suggest_k(anim, tolerance or DEFAULT_TOLERANCE)} or leave the option out"
+            f"one has {T}: {suggest_k(anim, tolerance or DEFAULT_TOLERANCE)} or leave the option out",
+            param="morph_targets"
         )
     offsets = frames - template[None]
     flat = offsets.reshape(T, -1)
@@ -185,7 +187,7 @@ def frame_basis(anim: Animation, tolerance: float | None = None, sparse: bool = 
 def suggest_k(anim: Animation, tolerance: float = DEFAULT_TOLERANCE) -> str:
     """A hint naming the K that meets `tolerance` for `anim` (for error messages)."""
     basis = morph_basis(anim, None, tolerance)
-    return f"use --morph-targets {basis.k} (meets the tolerance {tolerance:g} of the face size)"
+    return f"use {basis.k} morph targets (meets the tolerance {tolerance:g} of the face size)"
 
 
 def max_vertex_error(anim: Animation, basis: MorphBasis) -> float:

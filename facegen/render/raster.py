@@ -455,7 +455,8 @@ class Renderer:
 def check_size(size: int) -> int:
     if not isinstance(size, (int, np.integer)) or not 64 <= size <= 2048 or size % 2:
         raise FacegenError(
-            f"render size must be an even number of pixels from 64 to 2048, got {size}: e.g. --size 512"
+            f"render size must be an even number of pixels from 64 to 2048, got {size}: e.g. 512",
+            param="size",
         )
     return int(size)
 

@@ -106,8 +106,8 @@ def selection(speakers: str | Iterable[str] | None = None, sentences: str | Iter
         if preset not in PRESETS:
             raise FacegenError(f"unknown preset {preset!r}: choose one of {', '.join(PRESETS)}")
         if speakers is not None or sentences is not None:
-            raise FacegenError("a preset chooses the speakers and sentences itself: drop --subjects and "
-                               "--sentences, or drop --preset")
+            raise FacegenError("a preset chooses the speakers and sentences itself: drop the speakers and "
+                               "sentences, or the preset", param=("speakers", "sentences", "preset"))
         every = tuple(SENTENCES)
         return {**{s: every for s in TRAIN_SPEAKERS}, **{s: tuple(n for n in every if n >= 37)
                                                           for s in TEST_SPEAKERS}}
@@ -271,8 +271,8 @@ def _check_space(out: Path, sequences: int, fps: float) -> None:
     free = shutil.disk_usage(out).free
     if need > free:
         raise FacegenError(f"the {sequences} sequences need about {need / 1e9:.1f} GB but {out} has "
-                           f"{free / 1e9:.1f} GB free: free space, or generate fewer "
-                           "(--subjects, --sentences)")
+                           f"{free / 1e9:.1f} GB free: free space, or choose fewer speakers or sentences",
+                           param=("speakers", "sentences"))
 
 
 def _write_static(out: Path, writer, wanted: dict[str, tuple[int, ...]], read_templates_pkl) -> None:
