@@ -40,9 +40,15 @@ def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
     found: set[str] = set()
 
     def visit(node: ast.AST) -> None:
-        if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in known:
-            found.add(node.value)  # a module loaded by name (importlib, a preload list, the lazy API)
-            return
+        if name != "facegen":  # modules loaded by name: importlib's argument, a list of modules to preload
+            named = []
+            if isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) in (
+                    "import_module", "__import__") and node.args:
+                named = node.args[:1]
+            elif isinstance(node, ast.List | ast.Tuple | ast.Set):
+                named = node.elts
+            found.update(n.value for n in named if isinstance(n, ast.Constant) and n.value in known
+                         and "." in str(n.value))
         if isinstance(node, ast.If) and _is_type_checking(node):
             for child in node.orelse:
                 visit(child)
@@ -162,8 +168,10 @@ def test_the_layer_check_can_fail(tmp_path):
     assert layer_of("facegen.cli.animate", table) == 1 and layer_of("facegen.train", table) is None
     source = tmp_path / "mod.py"
     source.write_text('import importlib\n"""facegen.cli is named in a docstring"""\n'
+                      'ROW = dict(writer="facegen.model")\nPRELOAD = ["torch", "facegen.runtime"]\n'
                       'def f():\n    return importlib.import_module("facegen.cli")\n')
-    assert imports_of("facegen.mod", source, {"facegen.cli", "facegen.errors"}) == {"facegen.cli"}
+    known = {"facegen.cli", "facegen.errors", "facegen.runtime", "facegen.model"}
+    assert imports_of("facegen.mod", source, known) == {"facegen.cli", "facegen.runtime"}
 
 
 @pytest.mark.skipif(shutil.which("ruff", path=str(Path(sys.executable).parent)) is None and

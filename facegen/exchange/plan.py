@@ -27,8 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facegen.atomic import Transaction, check_writable
-from facegen.exchange import check_write_options, format_of, import_writer
-from facegen.exchange.formats import Format
+from facegen.exchange.formats import Format, check_write_options, format_of, import_writer
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
