@@ -155,8 +155,16 @@ def write_live_link(path: Path, weights: np.ndarray, fps: int) -> Path:
     return path
 
 
-def test_name_rule_copy_equals_facegen_arkit_names():
-    """facegen_import's folder carries its own copy of the names and the rule (Blender has no facegen)."""
+def test_blender_helper_uses_facegen_arkit_names(tmp_path):
+    """The Blender helper loads the names and the rule from facegen/arkit/names.py (Blender has no facegen),
+    which the add-on zip carries beside it."""
+    import zipfile
+
+    from facegen.blender.package import ADDON_MODULE, write_addon
+
+    with zipfile.ZipFile(write_addon(tmp_path / "addon.zip")) as archive:
+        shipped = archive.read(f"{ADDON_MODULE}/arkit_names.py")
+    assert shipped == (Path(facegen_arkit.__file__).parents[1] / "arkit" / "names.py").read_bytes()
     assert facegen_arkit.ARKIT_NAMES == ARKIT_NAMES
     names = [*ARKIT_NAMES, *CHARACTER_KEYS, *LIVE_LINK_COLUMNS, "blendShape2.JawOpen", "ARKIT-eyeWide_L",
              "facs_mouthPress-R", "Head|browDown_L", "bs.tongueOut", "eyeLookUp.L", "mouthClose.001",

@@ -2,8 +2,8 @@
 Blender, matched by name.
 
 Reading needs numpy only; `key_shapes` needs bpy. Like facegen_import.py this file imports nothing from
-facegen (Blender's Python does not have it), so it carries its own copy of ARKit's 52 names and of the
-name rule of facegen/arkit/names.py (`arkit_name`); tests/test_blender.py checks the copy is the same.
+facegen (Blender's Python does not have it): it loads ARKit's 52 names and their name rule (`arkit_name`) from
+the file facegen/arkit/names.py itself, which the add-on zip carries beside it.
 
     clip = read_weights("out.json")          # or out.csv; {"names", "weights" [T, N], "frames" [T], "fps", ...}
     done = key_shapes([bpy.data.objects["Face"]], clip)   # {"matched": {...}, "unmatched": [...]}
@@ -15,6 +15,7 @@ into a new action "facegen ARKit <file>" on each object's shape keys.
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 import math
 import re
@@ -24,29 +25,25 @@ import numpy as np
 
 ARKIT_EXTENSIONS = (".json", ".csv")
 
-# the same tuple, in the same order, as facegen/arkit/names.py ARKIT_NAMES
-ARKIT_NAMES: tuple[str, ...] = (
-    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
-    "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
-    "eyeSquintRight", "eyeWideRight", "jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose",
-    "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight", "mouthSmileLeft", "mouthSmileRight",
-    "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft",
-    "mouthStretchRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
-    "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft",
-    "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
-    "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight", "tongueOut",
-)
-_KEY = {n.lower(): n for n in ARKIT_NAMES}
-_PREFIX = re.compile(r"^(?:.*[.:|/])|^(?:arkit|blendshape\d*|bs|facs)[_\-. ]+", re.IGNORECASE)
+
+def _names():
+    """facegen's arkit/names.py, the one list of ARKit's 52 names and the one name rule, loaded from its file
+    (it needs only `re`): beside this file in the add-on zip (blender/package.py puts it there as
+    arkit_names.py), else from facegen/arkit/ of the tree this file is in."""
+    here = Path(__file__).resolve().parent
+    for path in (here / "arkit_names.py", here.parent / "arkit" / "names.py"):
+        if path.is_file():
+            spec = importlib.util.spec_from_file_location("facegen_arkit_names", path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            return module
+    raise ImportError(f"ARKit's names (arkit_names.py) are missing beside {here}: reinstall the add-on")
+
+
+_NAMES = _names()
+ARKIT_NAMES: tuple[str, ...] = _NAMES.ARKIT_NAMES
+arkit_name = _NAMES.arkit_name
 _TIMECODE = re.compile(r"^(\d+):(\d+):(\d+)[:;](\d+)(?:\.(\d+))?$")
-
-
-def arkit_name(name: str) -> str | None:
-    """The ARKit shape a shape key called `name` stands for, or None (the rule of facegen.arkit.names):
-    case-insensitive, prefixes such as `blendShape1.`, `ARKit_`, `Face:` stripped, `_L`/`_R` = Left/Right."""
-    key = _PREFIX.sub("", name.strip())
-    key = re.sub(r"(?:[_\-. ]|(?<=[a-z]))(L|R)$", lambda m: "Left" if m.group(1) == "L" else "Right", key)
-    return _KEY.get(key.replace("_", "").lower())
 
 
 # ---- reading (numpy only) ----------------------------------------------------------------------------------

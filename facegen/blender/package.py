@@ -24,6 +24,8 @@ def write_addon(path: str | os.PathLike = f"{ADDON_MODULE}.zip") -> Path:
     with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for name in ADDON_FILES:
             archive.write(folder / name, f"{ADDON_MODULE}/{name}")
+        # facegen_arkit.py loads ARKit's names from this file: Blender's Python has no facegen to import
+        archive.write(folder.parent / "arkit" / "names.py", f"{ADDON_MODULE}/arkit_names.py")
     return path
 
 

@@ -72,10 +72,10 @@ def write(
     rig: str = "pca",
     morph_targets: int | str | None = None,
     tolerance: float | None = None,
+    clips: str | int = "auto",
     meters_per_unit: float = DEFAULT_METERS_PER_UNIT,
     write_audio: bool = True,
     audio_source: str | os.PathLike | None = None,
-    clips: str | int = "auto",
 ) -> list[Path]:
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
