@@ -148,8 +148,8 @@ def make_dataset(root: Path, *, subjects=SUBJECTS, sentences=range(1, 8), with_a
 
 @functools.cache
 def procedural_rig():
-    from facegen.face.template import load_template
     from facegen.face.rig import Rig
+    from facegen.face.template import load_template
 
     mesh = load_template()
     return mesh, Rig(mesh)
@@ -158,7 +158,7 @@ def procedural_rig():
 def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 16000) -> Animation:
     """A speech-like animation of the procedural face (random phones through the rig) with a sound of
     noise bursts (loud where the jaw opens) lasting exactly frames / fps seconds."""
-    from facegen.phonetics import ESPEAK_TO_CMU
+    from facegen.espeak import phonemize
     from facegen.synth import curves as rigs
     from facegen.synth.lexicon import LEXICON
 
@@ -166,15 +166,18 @@ def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 1
     rng = np.random.default_rng(seed)
     seconds = frames / fps
     phones, t = [], 0.1
-    names = sorted(ESPEAK_TO_CMU)
+    lexicon = sorted(LEXICON)
+    spoken: list[str] = []  # the phonemes of random words of the lexicon, in order: English-like sequences
     while t < seconds - 0.15:
         if rng.random() < 0.08:
             t += rng.uniform(0.15, 0.4)
             continue
+        if not spoken:
+            spoken = phonemize(str(rng.choice(lexicon)))[::-1]
+            continue
         d = rng.uniform(0.05, 0.16)
-        phones.append((str(rng.choice(names)), t, min(t + d, seconds)))
+        phones.append((spoken.pop(), t, min(t + d, seconds)))
         t += d
-    lexicon = sorted(LEXICON)
     words = [SimpleNamespace(text=str(rng.choice(lexicon)), start=float(s), end=float(s) + 0.3)
              for s in np.sort(rng.uniform(0, max(seconds - 0.5, 0.1), max(1, int(seconds / 5))))]
     curves = rigs.motion_curves(phones, words, frames, fps, rng=rng)
