@@ -85,7 +85,7 @@ def rest_on_noise(bundle_path, seconds: float = 5.0) -> float:
     from facegen.audio import write_wav
     from facegen.bundle import load_bundle
     from facegen.lipsync import FaceGeometry, aperture
-    from facegen.pipeline import animate
+    from facegen import animate
 
     rng = np.random.default_rng(0)
     noise = np.cumsum(rng.standard_normal(int(seconds * 16000))) * 0.02

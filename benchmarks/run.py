@@ -225,8 +225,8 @@ def time_animate(wav: Path, txt: Path, model: Path, out: Path, runs: int) -> dic
 
 
 def import_profile() -> list[tuple[str, float]]:
-    """The slowest top-level imports of `facegen.pipeline` in a new process (python -X importtime)."""
-    proc = subprocess.run([sys.executable, "-X", "importtime", "-c", "import facegen.cli, facegen.pipeline"],
+    """The slowest top-level imports of `facegen.animator` in a new process (python -X importtime)."""
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-c", "import facegen.cli, facegen.animator"],
                           capture_output=True, text=True, check=False)
     packages: dict[str, tuple[int, float]] = {}  # package -> (indent, cumulative s) where first imported
     for line in proc.stderr.splitlines():
@@ -338,7 +338,7 @@ def forward_clip(bundle, w2v, wav: Path, seconds: float, runs: int) -> dict:
 LONG_SCRIPT = """
 import json, sys, time
 import numpy as np
-from facegen.pipeline import animate
+from facegen import animate
 from facegen.runtime import PROFILE, peak_rss_mb
 wav, txt, model, out = sys.argv[1:5]
 t0 = time.perf_counter()
@@ -437,7 +437,7 @@ def report(r: dict) -> str:
               "imports); writing = from `animate()` returning to the profile printed at exit (pxr import, the "
               "file); exit = the rest of the wall time (interpreter teardown of torch/transformers modules)."), "",
               f"`facegen --help`: {r['help']['median']:.2f} s (median of runs).", "",
-              "Slowest imports at start-up (`python -X importtime -c 'import facegen.cli, facegen.pipeline'`): "
+              "Slowest imports at start-up (`python -X importtime -c 'import facegen.cli, facegen.animator'`): "
               + ", ".join(f"{n} {s:.2f} s" if s else n for n, s in r["imports"]) + ".", ""]
     lines += ["## Model forward vs. a FaceFormer-class encoder (this process, best of runs, seconds)", "",
               ("Ours = the whole network: encoders, fusion, BiLSTMs and every output frame (template + offsets, "

@@ -118,10 +118,10 @@ def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead 
     process = start_process(_child, (sender, str(audio), text, with_phones), start="fork",
                             name="facegen-align")
     sender.close()
-    return AlignAhead(process, receiver)
     if process is None:  # no fork on this platform
         receiver.close()
         return None
+    return AlignAhead(process, receiver)
 
 
 def _child(sender, audio: str, text: str, with_phones: bool) -> None:

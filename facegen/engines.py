@@ -34,22 +34,18 @@ OnResult = Callable[[JobResult], None]
 
 
 class Worker:
-    """The model and text model loaded once, and the chunks run with them."""
+    """An Animator with the model and text model loaded once, and the chunks run with it."""
 
     def __init__(self, model: str | None, device: str, text_model: str | None, threads: int) -> None:
         limit_threads(threads)
-        from facegen.bundle import load_bundle
+        from facegen.animator import Animator
 
-        self.bundle = load_bundle(model)
-        self.device, self.text_model = device, text_model
-        if self.bundle.config.uses_text:
-            from facegen.text import load_text_backend
-
-            load_text_backend(self.bundle.text_backend, text_model)  # cached for every clip of this process
+        self.animator = Animator(model, text_model=text_model, device=device)
+        if self.animator.bundle.config.uses_text:
+            self.animator.text_backend()  # loaded once for every clip of this process
 
     def run(self, jobs: Sequence[Job], batch_size: int) -> list[JobResult]:
-        return run_batch(jobs, bundle=self.bundle, device=self.device, text_model=self.text_model,
-                         batch_size=batch_size)
+        return run_batch(jobs, animator=self.animator, batch_size=batch_size)
 
 
 def limit_threads(threads: int) -> None:
@@ -175,7 +171,8 @@ def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[int, Job
     """(chunk index, job, whether the model needs its phones too) for the jobs this process can force-align,
     in queue order (taken from the end): those whose words come from forced alignment, when the model uses
     them."""
-    from facegen.pipeline import force_aligned, forced_alignment_of
+    from facegen.animator import forced_alignment_of
+    from facegen.word_timing import force_aligned
 
     needs = forced_alignment_of(model)
     if needs is None:
