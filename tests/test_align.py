@@ -11,11 +11,11 @@ import pytest
 
 from facegen.align import align, align_phones, recognize
 from facegen.align_pieces import loud_frames, pieces, scored
+from facegen.alignment_files import read_alignment, write_alignment
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import Speech, pronounce, synthesize
 from facegen.phonetics import espeak_to_cmu
-from facegen.alignment_files import read_alignment, write_alignment
 from facegen.words import Word, normalize_transcript
 
 SENTENCES = [

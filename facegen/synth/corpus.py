@@ -149,9 +149,9 @@ def motion(speech, rig, style, rng: np.random.Generator, fps: float = 25.0) -> n
 
 def speaker_rig(speaker: str):
     """(Rig on the speaker's face, the speaker's SpeakerStyle)."""
-    from facegen.synth.curves import SpeakerStyle
     from facegen.face.procedural import speaker_face
     from facegen.face.rig import Rig
+    from facegen.synth.curves import SpeakerStyle
 
     i = speaker_index(speaker)
     return Rig(speaker_face(i)), SpeakerStyle.for_speaker(i)
@@ -362,8 +362,8 @@ def _start_speaker_worker(messages) -> None:
 
 
 def _speaker_job(out: str, speaker: str, numbers: tuple[int, ...], seed: int, fps: float) -> None:
-    """Synthesise e01 … max(numbers) in order and write the sequences in `numbers`; print one JSON line
-    per written sequence. Run in a fresh process (libespeak-ng's state), see _worker_main."""
+    """Synthesise e01 … max(numbers) in order and write the sequences in `numbers`, reporting each written
+    one to the parent. Run in a fresh process (libespeak-ng's state), see _run."""
     from facegen.datasets.biwi import DatasetWriter
 
     writer = DatasetWriter(out)

@@ -181,8 +181,8 @@ def _work(takes: list[Take], out: str, augmentation: bool) -> list[dict]:
 def _write_root(out: Path, takes: list[Take]) -> None:
     """BIWI.ply with its regions, templates.pkl (each style's face) and sentences.txt."""
     from facegen.datasets.biwi import DatasetWriter
-    from facegen.synth.corpus import speaker_index
     from facegen.face.procedural import make_face, speaker_face
+    from facegen.synth.corpus import speaker_index
 
     writer = DatasetWriter(out)
     writer.write_mesh(make_face())

@@ -107,12 +107,12 @@ class Engine:
 
     def synthesize(self, text: str, voice: Voice, rate: float) -> Utterance:
         """`text` said by `voice` at `rate` (checked by the module's `synthesize`)."""
-        """`exe`: the binary's name, for _run."""
         self.executable()
         with tempfile.TemporaryDirectory(prefix=f"facegen-{self.name}-") as tmp:
             return self._synthesize(self.binary, text, voice, rate, Path(tmp))
 
     def _synthesize(self, exe: str, text: str, voice: Voice, rate: float, tmp: Path) -> Utterance:
+        """`exe`: the binary's name, for _run."""
         raise NotImplementedError
 
     def _not_installed(self, voice: Voice) -> FacegenError:
