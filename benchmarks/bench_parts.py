@@ -21,8 +21,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from facegen.audio import FeatureConfig
-    from facegen.face.template import load_template
     from facegen.face.rig import Rig
+    from facegen.face.template import load_template
     from facegen.text import frame_features, load_text_backend
 
     rig = Rig(load_template())

@@ -45,12 +45,12 @@ def evaluate_set(bundle, corpus: str, test: str, limit: int | None) -> dict:
 
 def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None) -> dict:
     """Upper-face motion with the held-out emotional word / with its neutral twin, same audio and timing."""
+    from facegen.alignment_files import read_alignment
     from facegen.evaluate import prepare
     from facegen.lipsync import FaceGeometry, upper_face_response
     from facegen.synth.sentences import neutral_twin
     from facegen.synth.voice_corpus import XVOICE_OFFSET
     from facegen.text import load_text_backend, text_features
-    from facegen.alignment_files import read_alignment
     from facegen.words import Word, strip_edges
 
     run = prepare(bundle_path, corpus, "test-a", splits=_splits(test), quiet=True, warn=None)
@@ -82,10 +82,10 @@ def rest_on_noise(bundle_path, seconds: float = 5.0) -> float:
     """Median lip aperture (mm) of the model on pure noise (pink-ish, -30 dBFS) animated with --no-text."""
     import tempfile
 
+    from facegen import animate
     from facegen.audio import write_wav
     from facegen.bundle import load_bundle
     from facegen.lipsync import FaceGeometry, aperture
-    from facegen import animate
 
     rng = np.random.default_rng(0)
     noise = np.cumsum(rng.standard_normal(int(seconds * 16000))) * 0.02

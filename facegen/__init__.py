@@ -30,10 +30,10 @@ __all__ = ["Animation", "Animator", "FacegenError", "__version__", "animate", "l
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
+    from facegen.animator import Animator, animate
     from facegen.bundle import load_bundle
     from facegen.errors import FacegenError
     from facegen.exchange import read_animation, write_animation
-    from facegen.animator import Animator, animate
 
 
 def __getattr__(name: str):

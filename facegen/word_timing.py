@@ -68,8 +68,8 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
     --no-text, which only drops the text features) the phone alignment of the recognised words."""
-    from facegen.phonetics import phone_frames, silence
     from facegen.alignment_files import read_alignment, read_phones
+    from facegen.phonetics import phone_frames, silence
 
     if alignment is not None:
         words = read_alignment(alignment, duration=len(samples) / sr)

@@ -145,9 +145,9 @@ def test_align_file_answers_as_the_forked_aligner_does():
 def test_while_the_alignment_runs_the_word_vectors_are_computed_and_meanwhile_called(monkeypatch):
     """The work that needs no word times is done while they are found: the same clip as without it."""
     import facegen.text
+    from facegen.animator import Animator
     from facegen.bundle import load_bundle
     from facegen.exchange import import_writer
-    from facegen.animator import Animator
 
     animator = Animator(load_bundle())
     bundle = animator.bundle

@@ -147,8 +147,8 @@ def test_cli_refuses_bad_plans_and_options_before_any_work(speech, tmp_path):
 
 
 def test_batch_in_worker_processes_writes_validates_reports_and_skips(speech, model, tmp_path):
-    from facegen.bundle import load_bundle
     from facegen import animate
+    from facegen.bundle import load_bundle
 
     manifest = write_manifest(speech, ["s0.wav,F2,a/s0.npy", "s1.wav,M3,s1.npy", "nothere.wav,,gone.npy",
                                        "s2.wav,Z9,bad.npy", "s2.wav,1,s2.npy"])
@@ -201,8 +201,8 @@ def test_batch_in_worker_processes_writes_validates_reports_and_skips(speech, mo
 def test_the_main_process_aligns_waiting_items_as_a_worker_would(speech, tmp_path):
     """With transcripts, the main process force-aligns the last waiting items while the workers start: their
     files equal the library's run in this process, and a wrong transcript is that item's error, the same line."""
-    from facegen.batch import one_line
     from facegen import animate
+    from facegen.batch import one_line
 
     wrong = "Seven purple elephants were dancing slowly across the frozen river."
     rows = [(f"s{i}.wav", SENTENCES[i]) for i in (0, 1, 2, 0)] + [("s2.wav", wrong)]

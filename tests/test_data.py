@@ -139,8 +139,8 @@ def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     it = items[0]
     assert it.num_frames == round((1.0 + 0.08) * FPS) == it.mel.shape[0] == it.text.shape[0]
     assert it.mel.shape[1] == 128 and it.text.shape[1] == gpt2_backend.dim
-    from facegen.text import text_features
     from facegen.alignment_files import read_alignment
+    from facegen.text import text_features
 
     words = read_alignment(toy / "alignments" / "F2_e01.json")
     np.testing.assert_array_equal(it.text, text_features(words, gpt2_backend, it.num_frames, feats))
