@@ -27,15 +27,22 @@ IGNORED_JSON_KEYS = {"seconds", "elapsed", "elapsed_seconds", "wall", "wall_seco
                      "started", "finished", "date", "created", "timestamp", "time", "hostname", "host",
                      "pid", "load_average"}
 IGNORED_XML_ATTRS = {"time", "timestamp", "hostname"}
-IGNORED_TEXT = [re.compile(r"\bin \d+(\.\d+)? s\b")]  # "generated 2 sequences in 11 s" (data synth's stdout)
-NOT_OUTPUTS = ("logs/",)  # stderr (progress, notes: not files written), the tree run
+IGNORED_JSON_KEYS |= {"worker_cpu_seconds"}  # batch's report.json
+IGNORED_TEXT = [re.compile(r"\bin \d+(\.\d+)? s\b"),  # "generated 2 sequences in 11 s" (synth, batch stdout)
+                re.compile(r"\(\d+(\.\d+)?x real time\)")]  # batch's stdout
+# stderr (progress, notes: not files written) and the tree run; evaluate's feature cache in the dataset folder
+# (its keys and file names hold the files' mtimes)
+NOT_OUTPUTS = ("logs/", "corpus/.facegen_cache/")
+# Absolute paths (batch's report.json/.xml and stdout name OUTDIR): each folder's own path reads as <OUTDIR>.
+# batch's .facegen-batch.json keeps [size, mtime_ns] per file: the mtime is dropped (drop_mtimes below).
 
 
 
 class Diff:
     """What comparing two files found: the largest numeric difference and the first structural one."""
 
-    def __init__(self) -> None:
+    def __init__(self, roots: tuple[str, str] = ("", "")) -> None:
+        self.roots = roots  # each side's OUTDIR, read as <OUTDIR> in strings
         self.max_diff = 0.0
         self.where = ""
         self.problem: str | None = None
@@ -86,12 +93,19 @@ class Diff:
                     self.value(x, y, f"{where}[{i}]")
         elif _is_number(a) and _is_number(b):
             self.numbers(float(a), float(b), where)
+        elif isinstance(a, str) and isinstance(b, str):
+            if self._rooted(a, 0) != self._rooted(b, 1):
+                self.fail(f"{where}: {_short(a)} vs {_short(b)}")
         elif a != b:
             self.fail(f"{where}: {_short(a)} vs {_short(b)}")
         return None
 
+    def _rooted(self, s: str, side: int) -> str:
+        return s.replace(self.roots[side], "<OUTDIR>") if self.roots[side] else s
+
     def text(self, a: str, b: str, where: str) -> None:
         """Compare text whose numbers are compared as numbers (TextGrid, stdout)."""
+        a, b = self._rooted(a, 0), self._rooted(b, 1)
         for pattern in IGNORED_TEXT:
             a, b = pattern.sub("<ignored>", a), pattern.sub("<ignored>", b)
         number = r"(-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)"
@@ -307,9 +321,17 @@ def compare_pickle(a: Path, b: Path, d: Diff) -> None:
         d.value(pa, pb, "pickle")
 
 
-def compare_file(a: Path, b: Path) -> Diff:
+def drop_mtimes(state: dict) -> dict:
+    """batch's .facegen-batch.json without the files' mtimes: {"items": {name: {"files": {f: [size, mtime]}}}}
+    keeps [size]."""
+    for item in state.get("items", {}).values():
+        item["files"] = {k: v[:1] for k, v in item.get("files", {}).items()}
+    return state
+
+
+def compare_file(a: Path, b: Path, roots: tuple[str, str] = ("", "")) -> Diff:
     """Compare two files by kind (see the module docstring)."""
-    d = Diff()
+    d = Diff(roots)
     suffix = a.suffix.lower()
     try:
         if suffix == ".npy":
@@ -323,7 +345,10 @@ def compare_file(a: Path, b: Path) -> Diff:
         elif suffix == ".wav":
             compare_wav(a, b, d)
         elif suffix == ".json":
-            d.value(json.loads(a.read_text()), json.loads(b.read_text()), "json")
+            ja, jb = json.loads(a.read_text()), json.loads(b.read_text())
+            if a.name == ".facegen-batch.json":
+                ja, jb = drop_mtimes(ja), drop_mtimes(jb)
+            d.value(ja, jb, "json")
         elif suffix == ".csv":
             compare_csv(a, b, d)
         elif suffix == ".xml":
@@ -358,7 +383,7 @@ def compare(a_root: Path, b_root: Path) -> int:
         if a.stat().st_size == b.stat().st_size and _same_bytes(a, b):
             print(f"{rel}: identical")
             continue
-        d = compare_file(a, b)
+        d = compare_file(a, b, (str(a_root.resolve()), str(b_root.resolve())))
         if d.problem:
             print(f"{rel}: DIFFERENT: {d.problem}")
             different += 1
