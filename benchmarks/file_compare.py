@@ -27,7 +27,7 @@ IGNORED_JSON_KEYS = {"seconds", "elapsed", "elapsed_seconds", "wall", "wall_seco
                      "started", "finished", "date", "created", "timestamp", "time", "hostname", "host",
                      "pid", "load_average"}
 IGNORED_XML_ATTRS = {"time", "timestamp", "hostname"}
-IGNORED_JSON_KEYS |= {"worker_cpu_seconds"}  # batch's report.json
+IGNORED_JSON_KEYS |= {"worker_cpu_seconds", "cpu_seconds"}  # batch's report.json
 IGNORED_TEXT = [re.compile(r"\bin \d+(\.\d+)? s\b"),  # "generated 2 sequences in 11 s" (synth, batch stdout)
                 re.compile(r"\(\d+(\.\d+)?x real time\)")]  # batch's stdout
 # stderr (progress, notes: not files written) and the tree run; evaluate's feature cache in the dataset folder
