@@ -4,9 +4,9 @@ commit side by side in one process (`git show REF:facegen/align.py` imported as 
 Target (issue 13): at least 3x faster than the baseline on 60 s of speech, word timings within 20 ms of
 the baseline's. The baseline's own spread is shown beside it ("again": the largest difference and the words
 > 20 ms between its timed call and one more call on the same clip: it keeps pocketsphinx's noise estimate
-from one call to the next). Clips are built at run time (cached under the temp folder, never in the repo): sentences
-of the synthetic corpus said by several espeak-ng, Flite and Festival voices with pauses of 0.3-0.9 s
-between them, and examples/excellent_room.wav repeated with pauses. Where the synthesiser gives word
+from one call to the next). Clips are built at run time (cached under the temp folder, never in the repo):
+sentences of the synthetic corpus said by several espeak-ng, Flite and Festival voices with pauses of 0.3-0.9
+s between them, and examples/excellent_room.wav repeated with pauses. Where the synthesiser gives word
 timings, both aligners' word onsets are also compared with them.
 
     python benchmarks/bench_align.py [--runs 3] [--baseline REF] [--seconds 60]
@@ -54,9 +54,11 @@ def build_clip(name: str, seconds: float) -> tuple[np.ndarray, str, list[tuple[s
             text = SENTENCES[1 + k % len(SENTENCES)]
             utt = synthesize(text, CLIPS[name][k % len(CLIPS[name])])
             audio, rate, words = utt.audio, utt.sample_rate, utt.words
-        audio = resample(np.asarray(audio, np.float32), rate, RATE) if rate != RATE else np.asarray(audio, np.float32)
+        audio = resample(np.asarray(audio, np.float32), rate, RATE) if rate != RATE else np.asarray(audio,
+                                                                                                    np.float32)
         audio = audio * (0.6 / (np.max(np.abs(audio)) + 1e-9))
-        truth = None if words is None or truth is None else truth + [(w, total + a, total + b) for w, a, b in words]
+        truth = None if words is None or truth is None else truth + [(w, total + a, total + b)
+                                                                     for w, a, b in words]
         pause = np.zeros(int(rng.uniform(0.3, 0.9) * RATE), np.float32)
         parts += [audio, pause]
         texts.append(text)
@@ -119,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
             module._decoder(kind)  # loading the model is not alignment
     worst, speedups, words, moved = 0.0, [], 0, 0
     print(f"{'clip':15s} {'s':>5s} {'base s':>7s} {'new s':>6s} {'x':>5s} {'base cpu':>8s} {'new cpu':>7s} "
-          f"{'max diff':>8s} {'>20ms':>5s} {'words':>5s} {'again':>9s}  onset error vs synthesiser (base/new)")
+          f"{'max diff':>8s} {'>20ms':>5s} {'words':>5s} {'again':>9s}  onset error vs synthesiser "
+          "(base/new)")
     for name in CLIPS:
         audio, text, truth = build_clip(name, args.seconds)
         old_wall, old_cpu, old_words = timed(old, audio, text, args.runs)
@@ -131,15 +134,16 @@ def main(argv: list[str] | None = None) -> int:
         speedups.append(old_wall / new_wall)
         errors = [onset_error(w, truth) for w in (old_words, new_words)]
         shown = "/".join("-" if e is None else f"{e:.0f} ms" for e in errors)
-        print(f"{name:15s} {len(audio) / RATE:5.1f} {old_wall:7.2f} {new_wall:6.2f} {old_wall / new_wall:5.2f} "
-              f"{old_cpu:8.2f} {new_cpu:7.2f} {diffs.max():6.0f}ms {int(np.sum(diffs > 20)):5d} {len(diffs):5d} "
-              f"{again.max():4.0f}ms {int(np.sum(again > 20)):2d}  {shown}")
+        print(f"{name:15s} {len(audio) / RATE:5.1f} {old_wall:7.2f} {new_wall:6.2f} "
+              f"{old_wall / new_wall:5.2f} {old_cpu:8.2f} {new_cpu:7.2f} {diffs.max():6.0f}ms "
+              f"{int(np.sum(diffs > 20)):5d} {len(diffs):5d} {again.max():4.0f}ms "
+              f"{int(np.sum(again > 20)):2d}  {shown}")
         moved += int(np.sum(diffs > 20))
         for a, b, d in zip(old_words, new_words, diffs, strict=True):
             if d > 20:
                 print(f"    {a.text!r}: baseline {a.start:.2f}-{a.end:.2f}, new {b.start:.2f}-{b.end:.2f}")
-    print(f"median speed-up {statistics.median(speedups):.2f}x (target >= 3x); largest word timing difference "
-          f"{worst:.0f} ms, {moved} of {words} words > 20 ms (target <= 20 ms)")
+    print(f"median speed-up {statistics.median(speedups):.2f}x (target >= 3x); largest word timing "
+          f"difference {worst:.0f} ms, {moved} of {words} words > 20 ms (target <= 20 ms)")
     return 0
 
 

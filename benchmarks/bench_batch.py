@@ -6,11 +6,12 @@ Target (issue 13): >= 15x real time with `--jobs 2` over 20 sentences. The clips
 facegen.synth.voices (Flite, Festival and espeak-ng voices in turn; whichever are installed), one sentence of
 the synthetic corpus each, with its transcript in the manifest (forced alignment, as for recorded lines).
 Prints each configuration's wall seconds and real-time factor; `--compare 1` also runs `--jobs 1` (one worker,
-as `facegen batch` ran before) side by side, alternating, so that a busy machine slows both alike; `--before TREE`
-runs another source tree's `facegen batch` (e.g. a git worktree of the previous release) side by side the same way.
-Each run writes into an empty folder, as a CI runner's first run does, and its outputs (about 35 MB of points
-per clip in .usdc) are deleted before the next run is timed: replacing them instead (`--force` over the last
-run) adds the file system's work of freeing them, 0.5-1 s for 20 clips on the development machine.
+as `facegen batch` ran before) side by side, alternating, so that a busy machine slows both alike; `--before
+TREE` runs another source tree's `facegen batch` (e.g. a git worktree of the previous release) side by side
+the same way. Each run writes into an empty folder, as a CI runner's first run does, and its outputs (about 35
+MB of points per clip in .usdc) are deleted before the next run is timed: replacing them instead (`--force`
+over the last run) adds the file system's work of freeing them, 0.5-1 s for 20 clips on the development
+machine.
 
     python benchmarks/bench_batch.py [--clips 20] [--jobs 2] [--formats usdc] [--runs 1] [--compare 1]
                                      [--before TREE]
@@ -64,7 +65,8 @@ def run_batch(folder: Path, jobs: int, formats: str, tree: Path = REPO) -> float
     included); the outputs are deleted afterwards."""
     out = folder / "out"
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [sys.executable, "-m", "facegen", "batch", str(folder / "lines.csv"), "-o", str(out), "--jobs", str(jobs),
+    cmd = [sys.executable, "-m", "facegen", "batch", str(folder / "lines.csv"), "-o", str(out), "--jobs",
+           str(jobs),
            "--formats", formats, "-q"]
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.perf_counter()
@@ -94,7 +96,8 @@ def main() -> None:
     try:
         print(f"making {args.clips} clips in {folder}", flush=True)
         audio = make_clips(folder, args.clips)
-        print(f"{audio:.1f} s of speech; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
+        print(f"{audio:.1f} s of speech; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores",
+              flush=True)
         configs = [(args.jobs, REPO)] + ([(args.compare, REPO)] if args.compare else [])
         configs += [(args.jobs, args.before.resolve())] if args.before else []
         times: dict[tuple[int, Path], list[float]] = {c: [] for c in configs}
@@ -104,8 +107,8 @@ def main() -> None:
         for (jobs, tree), runs in times.items():
             med = statistics.median(runs)
             shown = "" if tree == REPO else f" ({tree})"
-            print(f"--jobs {jobs}{shown}: median {med:.1f} s over {len(runs)} run(s) = {audio / med:.1f}x real time "
-                  f"(target >= 15x on 2 cores)")
+            print(f"--jobs {jobs}{shown}: median {med:.1f} s over {len(runs)} run(s) = {audio / med:.1f}x "
+                  f"real time (target >= 15x on 2 cores)")
         for other in configs[1:]:
             ratio = statistics.median(times[other]) / statistics.median(times[configs[0]])
             print(f"--jobs {args.jobs} is {ratio:.2f}x faster than --jobs {other[0]}"

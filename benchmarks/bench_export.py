@@ -64,7 +64,8 @@ def long_clip(minutes: float):
     states = np.tanh(np.cumsum(0.05 * rng.standard_normal((frames, width)), axis=0)).astype(np.float32)
     face = bundle.template
     audio = (0.01 * rng.standard_normal(round(frames / fps * 16000))).astype(np.float32)
-    return Animation(frame_stream(bundle, states, face.vertices), face.faces, fps, face.vertices, audio, 16000)
+    return Animation(frame_stream(bundle, states, face.vertices), face.faces, fps, face.vertices, audio,
+                     16000)
 
 
 def usd_long(minutes: float, clips: str | None) -> None:
@@ -148,7 +149,8 @@ def main() -> None:
     parser.add_argument("--npy", help="a [T, 3V] animation to write instead of the rig clip")
     parser.add_argument("--template", help="the template mesh of --npy")
     parser.add_argument("--usd-long", type=float, metavar="MINUTES", help="the long-clip USD memory case")
-    parser.add_argument("--usd-clips", help="with --usd-long: auto, never or frames per clip (default: the writer's)")
+    parser.add_argument("--usd-clips", help="with --usd-long: auto, never or frames per clip (default: the "
+                                            "writer's)")
     parser.add_argument("--usdc-throughput", action="store_true",
                         help="time a minute of points .usdc vs .npy")
     args = parser.parse_args()
@@ -195,7 +197,8 @@ def main() -> None:
     best = min(r["seconds"] for r in results)
     size = results[-1]["bytes"]
     print(json.dumps({"benchmark": "glb_export", "frames": anim.num_frames, "vertices": anim.num_vertices,
-                      "best_seconds": best, "median_seconds": float(np.median([r["seconds"] for r in results])),
+                      "best_seconds": best,
+                      "median_seconds": float(np.median([r["seconds"] for r in results])),
                       "bytes": size, "size_ok": size <= 5_000_000, "time_ok": best <= 3.0}))
 
 

@@ -1,8 +1,8 @@
 """Benchmark: the small stages whose speed tests used to assert (they are not timed tests any more).
 
 Targets (2 CPU cores): rig.pose of 125 frames (5 s) on the procedural face < 1 s; MiniLM word vectors of a
-720-word transcript < 20 s; per-frame text features of 10 minutes (1,500 words, 15,000 frames) < 3 s; the 2,400 generated corpus
-sentences < 1 s.
+720-word transcript < 20 s; per-frame text features of 10 minutes (1,500 words, 15,000 frames) < 3 s; the
+2,400 generated corpus sentences < 1 s.
 
     python benchmarks/bench_parts.py [--runs 3]
 """
@@ -41,7 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     spans = [Word("w", s, s + d) for s, d in zip(starts, rng.uniform(0.05, 0.6, 1500), strict=True)]
     vectors = rng.normal(size=(1500, 384)).astype(np.float32)
     config = FeatureConfig(fps=25.0)
-    rows.append(("text frames, 10 min", best_of(lambda: frame_features(spans, vectors, 15_000, config), args.runs),
+    rows.append(("text frames, 10 min", best_of(lambda: frame_features(spans, vectors, 15_000, config),
+                                                args.runs),
                  3.0))
 
     from facegen.synth.sentences import generated_sentences

@@ -1,10 +1,12 @@
 """Benchmark: `facegen animate clip.wav --text-file clip.txt -o out.usdc` on a 5 s clip, as a new process.
 
-Target (2 CPU cores, idle): <= 2.5 s wall. Runs the command N times in new processes with FACEGEN_PROFILE=1 and
-prints the median / min / max wall time and the median of each stage (start-up = process start to `animate()`:
-Python, click, numpy, and torch where it is imported at start; the profile's stages; exit = from the profile's
-report at exit to the parent seeing the process end: the interpreter's teardown, if any; other = the rest). With `--before TREE` (e.g. a git worktree of main) the same command runs from that source tree
-too, the two in turn (A B A B ...), and each pair's ratio is printed: on a shared machine, quote ratios and medians.
+Target (2 CPU cores, idle): <= 2.5 s wall. Runs the command N times in new processes with FACEGEN_PROFILE=1
+and prints the median / min / max wall time and the median of each stage (start-up = process start to
+`animate()`: Python, click, numpy, and torch where it is imported at start; the profile's stages; exit = from
+the profile's report at exit to the parent seeing the process end: the interpreter's teardown, if any; other =
+the rest). With `--before TREE` (e.g. a git worktree of main) the same command runs from that source tree too,
+the two in turn (A B A B ...), and each pair's ratio is printed: on a shared machine, quote ratios and
+medians.
 
     python benchmarks/bench_start.py [--runs 5] [--before /path/to/main] [--seconds 5]
 """
@@ -40,7 +42,8 @@ def run_once(tree: Path, wav: Path, txt: Path, out: Path) -> dict:
                    if line.startswith('{"facegen_profile"'))
     stages = {"start-up": profile["marks"]["animate_start"] - start, **profile["facegen_profile"]}
     stages["exit"] = start + wall - profile["exit"]
-    stages["other"] = wall - sum(v for k, v in stages.items() if not k.endswith("_in_parallel"))  # those overlap
+    # those overlap
+    stages["other"] = wall - sum(v for k, v in stages.items() if not k.endswith("_in_parallel"))
     said = [line for line in proc.stderr.splitlines() if not line.startswith("{")]
     for written in {out, out.with_suffix(".wav")} - {wav}:  # 430 MB a minute of points: left behind, the dirty
         written.unlink(missing_ok=True)  # pages of a dozen runs make the kernel throttle the later runs' writing
@@ -75,11 +78,12 @@ def main(argv: list[str] | None = None) -> int:
         results: dict[str, list[dict]] = {name: [] for name in trees}
         for i in range(args.runs):
             for name, tree in trees.items():
-                results[name].append(run_once(tree, wav, txt, Path(tmp) / f"out{i}-{name.replace(' ', '_')}.usdc"))
+                results[name].append(run_once(tree, wav, txt,
+                                              Path(tmp) / f"out{i}-{name.replace(' ', '_')}.usdc"))
     load_after = os.getloadavg()
 
-    print(f"facegen animate, {seconds:.2f} s clip -> .usdc, new processes; {os.cpu_count()} CPUs, load average "
-          f"{load_before[0]:.2f} before, {load_after[0]:.2f} after (busy when above ~0.5)")
+    print(f"facegen animate, {seconds:.2f} s clip -> .usdc, new processes; {os.cpu_count()} CPUs, load "
+          f"average {load_before[0]:.2f} before, {load_after[0]:.2f} after (busy when above ~0.5)")
     for name, runs in results.items():
         print("\n".join(summary(f"{name} ({trees[name]})", runs)))
     if args.before:

@@ -75,8 +75,8 @@ def main() -> None:
     ap.add_argument("--files", type=int, default=16, help="distinct target .npy files on disk")
     ap.add_argument("--pca", type=int, default=0, metavar="K",
                     help="train the output layer in a K-dimensional basis (facegen train --output-layer pca "
-                         "--basis K), with the shipped model's loss terms (lip 1, velocity 0.5, upper face 8) "
-                         "and the phone stream; targets are coefficients, as in training")
+                         "--basis K), with the shipped model's loss terms (lip 1, velocity 0.5, upper face "
+                         "8) and the phone stream; targets are coefficients, as in training")
     args = ap.parse_args()
 
     load_before = os.getloadavg()
@@ -106,8 +106,10 @@ def main() -> None:
             batches = [Batch(it, i % 6, 6, device) for i, it in enumerate(items)]
             for b in batches if args.pca else []:
                 rng = np.random.default_rng(len(b.item.mel))
-                b.coefficients = torch.from_numpy(rng.normal(0, 0.01, (b.item.num_frames, args.pca)).astype(np.float32))
-                b.phones = torch.nn.functional.one_hot(torch.from_numpy(rng.integers(0, len(PHONES), b.item.num_frames)),
+                b.coefficients = torch.from_numpy(rng.normal(0, 0.01, (b.item.num_frames,
+                                                                       args.pca)).astype(np.float32))
+                b.phones = torch.nn.functional.one_hot(torch.from_numpy(rng.integers(0, len(PHONES),
+                                                                                     b.item.num_frames)),
                                                        len(PHONES)).float()[None]
             train_epoch(model, optimizer, batches, [0, 1], coefficient_loss=coefficient_loss)  # warm-up
             times = []

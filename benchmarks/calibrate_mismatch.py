@@ -1,11 +1,11 @@
 """Calibration of the aligner's mismatch check (facegen.align._check_match, its bound MAX_WORD_GAP).
 
-The 20 sentences of benchmarks/bench_batch.py (Flite, Festival and espeak-ng voices in turn) are aligned against
-their own transcript and against the next sentence's, clean and with pink, white and babble noise at 10 and
-5 dB SNR (7 conditions: 140 matching and 140 wrong runs). For each run it records whether an alignment exists,
-the share of loud frames outside words and the median word's score gap; it prints the gaps of the runs that
-align and, for a few bounds around the shipped one, how many matching and wrong transcripts would be refused
-end to end (no alignment, too much unexplained speech, or a gap above the bound).
+The 20 sentences of benchmarks/bench_batch.py (Flite, Festival and espeak-ng voices in turn) are aligned
+against their own transcript and against the next sentence's, clean and with pink, white and babble noise at
+10 and 5 dB SNR (7 conditions: 140 matching and 140 wrong runs). For each run it records whether an alignment
+exists, the share of loud frames outside words and the median word's score gap; it prints the gaps of the runs
+that align and, for a few bounds around the shipped one, how many matching and wrong transcripts would be
+refused end to end (no alignment, too much unexplained speech, or a gap above the bound).
 
     python benchmarks/calibrate_mismatch.py [--clips 20]
 """
@@ -82,7 +82,8 @@ def main(argv: list[str] | None = None) -> int:
     for bound in range(int(align.MAX_WORD_GAP) - 6, int(align.MAX_WORD_GAP) + 7, 2):
         counts = [sum(r[1] is None or r[1][0] > align.MAX_UNEXPLAINED or r[1][1] > bound for r in runs)
                   for runs in results.values()]
-        print(f"{bound:5d}  {counts[0]:8d}/{len(results['matching'])}  {counts[1]:8d}/{len(results['wrong'])}")
+        print(f"{bound:5d}  {counts[0]:8d}/{len(results['matching'])}  "
+              f"{counts[1]:8d}/{len(results['wrong'])}")
     return 0
 
 

@@ -2,7 +2,8 @@
 
 On a voices corpus (`facegen data synth OUT --preset voices`), for each model bundle given:
 
-- test-a: the test sentences said by TRAINING voices (espeak-ng variants, Festival diphones), unseen sentences;
+- test-a: the test sentences said by TRAINING voices (espeak-ng variants, Festival diphones), unseen
+  sentences;
 - held-out synthesiser: the same sentences said by Flite's voices (slt, rms, awb), never in training;
 - unseen words: the test-unseen sentences (one HELD_OUT_LEXICON word each, never in any training sentence)
   said by the held-out synthesiser; the upper-face response is the upper face's motion with the emotional
@@ -32,7 +33,8 @@ STYLES = ("F2", "F3", "F4", "M3", "M4", "M5")
 def _splits(test: str):
     from facegen.datasets.splits import Splits
 
-    return Splits(train_subjects=STYLES, test_subjects=(), train_sentences="49-1776", val_sentences="1777-1992",
+    return Splits(train_subjects=STYLES, test_subjects=(), train_sentences="49-1776",
+                  val_sentences="1777-1992",
                   test_sentences=test)
 
 
@@ -105,8 +107,10 @@ def row(name: str, sets: dict, unseen: dict, noise_mm: float) -> str:
     cells = [name]
     for key in ("test-a", "xvoice"):
         m, ls = sets[key]["metrics"], sets[key]["lipsync"] or {}
-        cells += [fmt(m["lve"] * 1e4, "{:.2f}"), fmt(m["upper_error"], "{:.2e}"), fmt(ls.get("aperture_r"), "{:.2f}"),
-                  fmt(ls.get("aperture_median_ratio"), "{:.2f}"), fmt(ls.get("bilabial_closure_rate"), "{:.0%}"),
+        cells += [fmt(m["lve"] * 1e4, "{:.2f}"), fmt(m["upper_error"], "{:.2e}"), fmt(ls.get("aperture_r"),
+                                                                                      "{:.2f}"),
+                  fmt(ls.get("aperture_median_ratio"), "{:.2f}"), fmt(ls.get("bilabial_closure_rate"),
+                                                                      "{:.0%}"),
                   fmt(ls.get("crossed_lips_rate"), "{:.1%}"), fmt(ls.get("rest_aperture_mm"), "{:.1f}")]
     cells.append(fmt(unseen["response"], "{:.2f}"))
     cells.append(fmt(noise_mm, "{:.1f}"))

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as bench_train.py: spinning OpenMP threads on busy cores
+# as bench_train.py: spinning OpenMP threads on busy cores
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import argparse
 import json
@@ -42,7 +43,8 @@ FPS = 25.0
 TARGETS = {"forward_x_realtime": 100.0, "animate_5s_wall": 2.5, "animate_60s_wall": 6.0, "help_wall": 0.5,
            "long_rss_mb": 2048.0}
 BLOCK_VARIANTS = (128, 256, 1024)  # output blocks timed besides the default (facegen.inference.BLOCK_FRAMES)
-STAGES = ("start-up", "model_load", "audio", "alignment", "text_model_load", "text_features", "audio_features",
+STAGES = ("start-up", "model_load", "audio", "alignment", "text_model_load", "text_features",
+          "audio_features",
           "inference", "writing", "exit")
 
 
@@ -62,7 +64,8 @@ def machine() -> dict:
         cpuinfo = Path("/proc/cpuinfo").read_text()
         info["cpu"] = re.search(r"model name\s*:\s*(.*)", cpuinfo).group(1).strip()
         flags = re.search(r"flags\s*:\s*(.*)", cpuinfo).group(1).split()
-        info["simd"] = " ".join(f for f in ("avx2", "avx512f", "avx512_bf16", "avx512_vnni", "amx_tile") if f in flags)
+        info["simd"] = " ".join(f for f in ("avx2", "avx512f", "avx512_bf16", "avx512_vnni", "amx_tile")
+                                if f in flags)
         mem = Path("/proc/meminfo").read_text()
         info["ram_gb"] = round(int(re.search(r"MemTotal:\s+(\d+)", mem).group(1)) / 2**20, 1)
     except (OSError, AttributeError):
@@ -89,7 +92,8 @@ def machine() -> dict:
     try:
         from threadpoolctl import threadpool_info
 
-        info["blas"] = ", ".join(f"{p['internal_api']} {p.get('version') or ''} {p.get('architecture') or ''}".strip()
+        info["blas"] = ", ".join(f"{p['internal_api']} {p.get('version') or ''} "
+                                 f"{p.get('architecture') or ''}".strip()
                                  for p in threadpool_info() if p["user_api"] == "blas")
     except ImportError:
         pass
@@ -104,7 +108,8 @@ def busy_processes() -> list[str]:
                              check=False).stdout.splitlines()[1:6]
     except OSError:
         return []
-    return [line.strip()[:100] for line in out if float(line.split()[1]) > 20 and str(os.getpid()) != line.split()[0]]
+    return [line.strip()[:100] for line in out if float(line.split()[1]) > 20
+            and str(os.getpid()) != line.split()[0]]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -202,7 +207,8 @@ def stages_of(run: dict) -> dict:
     marks = prof.get("marks", {})
     if "animate_start" in marks:
         stages["start-up"] = marks["animate_start"] - run["start"]
-    # the rest: mostly interpreter teardown at exit ("alignment_in_parallel" ran in another process, beside these)
+    # the rest: mostly interpreter teardown at exit ("alignment_in_parallel" ran in another process, beside
+    # these)
     stages["exit"] = run["wall"] - sum(v for k, v in stages.items() if not k.endswith("_in_parallel"))
     return stages
 
@@ -237,8 +243,10 @@ def import_profile() -> list[tuple[str, float]]:
         depth, seconds = len(m.group(2)), int(m.group(1)) / 1e6
         if root not in packages or depth < packages[root][0]:
             packages[root] = (depth, seconds)
-    rows = sorted(((k, v[1]) for k, v in packages.items() if not k.startswith("facegen")), key=lambda r: -r[1])
-    heavy = sorted(k for k in packages if k in ("librosa", "numba", "transformers", "pxr", "scipy", "sklearn"))
+    rows = sorted(((k, v[1]) for k, v in packages.items() if not k.startswith("facegen")),
+                  key=lambda r: -r[1])
+    heavy = sorted(k for k in packages if k in ("librosa", "numba", "transformers", "pxr", "scipy",
+                                                "sklearn"))
     return rows[:5] + [(f"(imported among them: {', '.join(heavy) or 'none of librosa, numba, transformers, pxr'})",
                         0.0)]
 
@@ -269,7 +277,8 @@ def forward_times(model: Path, clips: dict[str, tuple[Path, Path, float]], runs:
     out = {}
     for name, (wav, _, seconds) in clips.items():
         out[name] = forward_clip(bundle, w2v, wav, seconds, runs)
-        log(f"  forward {name}: ours {out[name]['ours']:.3f} s, wav2vec2-base {out[name]['wav2vec2_base']:.2f} s")
+        log(f"  forward {name}: ours {out[name]['ours']:.3f} s, wav2vec2-base "
+            f"{out[name]['wav2vec2_base']:.2f} s")
     return out
 
 
@@ -398,7 +407,8 @@ def training_speed(sequences: int) -> dict:
     if not m:
         log(f"  bench_train.py failed:\n{proc.stdout[-1000:]}{proc.stderr[-1000:]}")
         return {}
-    return {"sequences": sequences, "seconds_per_epoch": float(m.group(1)), "sequences_per_s": float(m.group(2))}
+    return {"sequences": sequences, "seconds_per_epoch": float(m.group(1)),
+            "sequences_per_s": float(m.group(2))}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -419,7 +429,8 @@ def report(r: dict) -> str:
               f"BLAS: {m.get('blas', '?')}"),
              "- " + ", ".join(f"{k} {v}" for k, v in m["versions"].items()) + f", Python {m['python']}",
              f"- load average at start {m['load_average']}"
-             + (f"; busy processes at start: {'; '.join(r['busy'])} (numbers are pessimistic)" if r["busy"] else
+             + (f"; busy processes at start: {'; '.join(r['busy'])} (numbers are pessimistic)" if r["busy"]
+                else
                 " (machine otherwise idle)"),
              f"- model: {r['model']}", ""]
     lines += ["## Targets", "", "| target | measured | met |", "|---|---|---|"]
@@ -432,21 +443,23 @@ def report(r: dict) -> str:
         st = a["stages"]
         shares = [f"{st.get(s, 0):.2f} ({100 * st.get(s, 0) / a['wall']:.0f}%)" for s in STAGES]
         lines.append(f"| {name} | {a['audio_seconds']:.1f} | {a['frames']} | {a['wall']:.2f} | "
-                     f"{a['audio_seconds'] / a['wall']:.1f} | {fmt(a['rss_mb'], 0)} | " + " | ".join(shares) + " |")
-    lines += ["", ("Stages from FACEGEN_PROFILE=1; start-up = process start to `animate()` (Python, click, torch "
-              "imports); writing = from `animate()` returning to the profile printed at exit (pxr import, the "
-              "file); exit = the rest of the wall time (interpreter teardown of torch/transformers modules)."), "",
+                     f"{a['audio_seconds'] / a['wall']:.1f} | {fmt(a['rss_mb'], 0)} | " + " | ".join(shares)
+                     + " |")
+    lines += ["", ("Stages from FACEGEN_PROFILE=1; start-up = process start to `animate()` (Python, click, "
+              "torch imports); writing = from `animate()` returning to the profile printed at exit (pxr "
+              "import, the file); exit = the rest of the wall time (interpreter teardown of "
+              "torch/transformers modules)."), "",
               f"`facegen --help`: {r['help']['median']:.2f} s (median of runs).", "",
               "Slowest imports at start-up (`python -X importtime -c 'import facegen.cli, facegen.animator'`): "
               + ", ".join(f"{n} {s:.2f} s" if s else n for n, s in r["imports"]) + ".", ""]
     lines += ["## Model forward vs. a FaceFormer-class encoder (this process, best of runs, seconds)", "",
-              ("Ours = the whole network: encoders, fusion, BiLSTMs and every output frame (template + offsets, "
-               "float32 [T, 23370, 3]), as facegen.inference runs it: decoder states on one torch thread, output "
-               "blocks of 512 frames on numpy's BLAS (2 threads). wav2vec2-base = transformers' `Wav2Vec2Model(Wav2Vec2Config())`, random "
-               "weights, on the same 16 kHz audio: only the audio encoder of FaceFormer/CodeTalker (their "
-               "decoders come on top)."), "",
-              ("| clip | frames | ours | x real time | states only | one-pass torch forward | torch/MKL output "
-               "blocks | blocks of 128 / 256 / 1024 | 1 thread | wav2vec2-base | wav2vec2 / ours |"),
+              ("Ours = the whole network: encoders, fusion, BiLSTMs and every output frame (template + "
+               "offsets, float32 [T, 23370, 3]), as facegen.inference runs it: decoder states on one torch "
+               "thread, output blocks of 512 frames on numpy's BLAS (2 threads). wav2vec2-base = "
+               "transformers' `Wav2Vec2Model(Wav2Vec2Config())`, random weights, on the same 16 kHz audio: "
+               "only the audio encoder of FaceFormer/CodeTalker (their decoders come on top)."), "",
+              ("| clip | frames | ours | x real time | states only | one-pass torch forward | torch/MKL "
+               "output blocks | blocks of 128 / 256 / 1024 | 1 thread | wav2vec2-base | wav2vec2 / ours |"),
               "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, f in r["forward"].items():
         blocks = " / ".join(f"{f[f'ours_block_{b}']:.3f}" for b in BLOCK_VARIANTS)
@@ -455,8 +468,9 @@ def report(r: dict) -> str:
                      f"{blocks} | {f['ours_1_thread']:.3f} | {f['wav2vec2_base']:.2f} | "
                      f"**{f['wav2vec2_base'] / f['ours']:.1f}x** |")
     if r.get("long"):
-        lines += ["", "## Long audio", "", ("| clip | audio s | frames | wall s | s per audio minute | peak RSS MB | "
-                                            "vertices MB | path | stages |"), "|---|---|---|---|---|---|---|---|---|"]
+        lines += ["", "## Long audio", "", ("| clip | audio s | frames | wall s | s per audio minute | peak "
+                                            "RSS MB | vertices MB | path | stages |"),
+                  "|---|---|---|---|---|---|---|---|---|"]
         for name, x in r["long"].items():
             if "error" in x:
                 lines.append(f"| {name} | failed |")
@@ -469,8 +483,8 @@ def report(r: dict) -> str:
         w = r["writing"]
         lines += ["", "## Writing and training", "",
                   (f"- .usdc (points, {w['frames']} frames of 23,370 vertices): {w['usdc_seconds']:.2f} s = "
-                   f"{w['frames'] / w['usdc_seconds']:.0f} frames/s, {w['usdc_mb'] / w['usdc_seconds']:.0f} MB/s "
-                   f"({w['usdc_mb']:.0f} MB)")]
+                   f"{w['frames'] / w['usdc_seconds']:.0f} frames/s, {w['usdc_mb'] / w['usdc_seconds']:.0f} "
+                   f"MB/s ({w['usdc_mb']:.0f} MB)")]
         if "glb_seconds" in w:
             lines.append(f"- .glb (bench_export.py, PCA morph targets at 1e-3): {w['glb_seconds']:.2f} s = "
                          f"{w['frames'] / w['glb_seconds']:.0f} frames/s ({w['glb_mb']:.1f} MB)")
@@ -525,7 +539,8 @@ def main(argv: list[str] | None = None) -> int:
             wav, txt, seconds = make_clip(folder, 60.0 * args.usd_minutes, "clip_usd")
             a = time_animate(wav, txt, model, folder / "clip_usd.usdc", 1)
             r["long"][f"{args.usd_minutes:g} min .usdc"] = {
-                "audio_seconds": seconds, "frames": round(seconds * FPS), "wall": a["wall"], "rss_mb": a["rss_mb"],
+                "audio_seconds": seconds, "frames": round(seconds * FPS), "wall": a["wall"],
+                "rss_mb": a["rss_mb"],
                 "output_mb": seconds * FPS * 23370 * 12 / 2**20, "path": "`facegen animate`, .usdc points",
                 "stages": a["stages"]}
             log(f"{args.usd_minutes:g} min usdc: {a['wall']:.1f} s, {a['rss_mb']} MB")
@@ -540,14 +555,16 @@ def main(argv: list[str] | None = None) -> int:
          sixty["seconds"] / sixty["ours"] >= TARGETS["forward_x_realtime"]),
         ("`facegen animate` 5 s clip, new process, .usdc", f"{five['wall']:.2f} s", "≤ 2.5 s",
          five["wall"] <= TARGETS["animate_5s_wall"]),
-        ("`facegen --help`", f"{r['help']['median']:.2f} s", "≤ 0.5 s", r["help"]["median"] <= TARGETS["help_wall"]),
+        ("`facegen --help`", f"{r['help']['median']:.2f} s", "≤ 0.5 s",
+         r["help"]["median"] <= TARGETS["help_wall"]),
         ("no JIT warm-up on the animate path: librosa/numba never imported by `facegen animate`",
          "imported: " + (", ".join(five["modules"]) or "none of the heavy modules"), "no librosa, no numba",
          not {"librosa", "numba"} & set(five["modules"])),
     ]
     if "60 s" in r["animate"]:
         wall = r["animate"]["60 s"]["wall"]
-        r["targets"].insert(2, ("`facegen animate` 60 s clip with its transcript, new process, .usdc", f"{wall:.2f} s",
+        r["targets"].insert(2, ("`facegen animate` 60 s clip with its transcript, new process, .usdc",
+                                f"{wall:.2f} s",
                                 "≤ 6 s", wall <= TARGETS["animate_60s_wall"]))
     if long10 and "rss_mb" in long10:
         r["targets"].append(("10 min of audio to .npy, peak RSS", f"{long10['rss_mb']:.0f} MB", "≤ 2048 MB",
