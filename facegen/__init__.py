@@ -26,7 +26,8 @@ _API = {
     "write_animation": "facegen.exchange",
     "FacegenError": "facegen.errors",
 }
-__all__ = ["Animation", "Animator", "FacegenError", "__version__", "animate", "load_bundle", "read_animation", "write_animation"]
+__all__ = ["Animation", "Animator", "FacegenError", "__version__", "animate", "load_bundle", "read_animation",
+           "write_animation"]
 
 if TYPE_CHECKING:
     from facegen.animation import Animation

@@ -7,8 +7,8 @@ pronunciation from libespeak-ng (`facegen.espeak.pronounce`).
 Long audio is aligned piece by piece, cut at pauses (`facegen.align_pieces`): each pass costs time that
 grows with the length times the words in reach, and a piece that fails is retried alone with wide beams.
 Every pass subtracts the whole clip's cepstral mean and starts with a fresh noise estimate, so results never
-depend on earlier calls; each piece re-aligns the word before it so that its first onset is found after speech:
-the pieces give the words and phones of one search over the clip.
+depend on earlier calls; each piece re-aligns the word before it so that its first onset is found after
+speech: the pieces give the words and phones of one search over the clip.
 """
 
 from __future__ import annotations
@@ -54,15 +54,17 @@ _WIDE = {"beam": 1e-120, "wbeam": 1e-100, "pbeam": 1e-120, "maxhmmpf": -1}
 # Decoder is given (the en-us model says "-cmn batch": each piece would subtract its own mean, and the words
 # near a cut move by up to half a second), so "live" reaches pocketsphinx through a copy of it (_decoder).
 _ALIGN = {"lm": None, "bestpath": False, "cmn": "live"}
-# The mismatch check's free phone loop ("phone-loop", _free_gaps) scores the acoustic model on every third frame
-# only (ds=3, the scores reused in between: half the time of every frame); the words and phones of an alignment
-# always come from every frame. Neither it nor "cmn" needs the 130,000-word dictionary (a tenth of a second to load).
+# The mismatch check's free phone loop ("phone-loop", _free_gaps) scores the acoustic model on every third
+# frame only (ds=3, the scores reused in between: half the time of every frame); the words and phones of an
+# alignment always come from every frame. Neither it nor "cmn" needs the 130,000-word dictionary (a tenth of a
+# second to load).
 _CONFIGS = {
     "align": _ALIGN,
     "align-wide": {**_ALIGN, **_WIDE},
     "align-nofiller": {**_ALIGN, "fsgusefiller": False, **_WIDE},
     "phone-loop": {**_ALIGN, "ds": 3, "dict": os.devnull},
-    "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False, "ds": 10, "dict": os.devnull},  # its features count
+    # its features count
+    "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False, "ds": 10, "dict": os.devnull},
     "recognize": {},
 }
 # A transcript that does not match the speech (see _check_match): more than this share of the loud
@@ -86,8 +88,8 @@ def _decoder(kind: str):
             raise FacegenError(f"cannot start pocketsphinx ({exc}): reinstall it with "
                                "`pip install --force-reinstall pocketsphinx`") from exc
         except OSError as exc:  # the temporary copy of feat.params (_new_decoder)
-            raise FacegenError(f"cannot write pocketsphinx's settings to a temporary folder ({exc}): set TMPDIR "
-                               "to a writable folder") from exc
+            raise FacegenError(f"cannot write pocketsphinx's settings to a temporary folder ({exc}): set "
+                               "TMPDIR to a writable folder") from exc
         _DECODERS[kind] = decoder
     return _DECODERS[kind]
 
@@ -112,8 +114,8 @@ def _new_decoder(pocketsphinx, config: dict):
 
 
 def warm() -> None:
-    """Create the decoders every alignment uses now (the acoustic model and the 130,000-word dictionary: ~0.18 s),
-    e.g. in a process that forks workers; pocketsphinx starts no threads, so they fork safely."""
+    """Create the decoders every alignment uses now (the acoustic model and the 130,000-word dictionary: ~0.18
+    s), e.g. in a process that forks workers; pocketsphinx starts no threads, so they fork safely."""
     with _LOCK:
         for kind in ("align", "phone-loop", "cmn"):
             _decoder(kind)
@@ -230,13 +232,14 @@ def _free_gaps(pcm: bytes, n_frames: int, cmn: str) -> np.ndarray | None:
 
 
 def _mismatch(detail: str) -> FacegenError:
-    return FacegenError(f"the transcript does not match the speech ({detail}): check the transcript; the aligner "
-                        "knows English only, so for speech in another language align it with a tool for that "
-                        "language (e.g. the Montreal Forced Aligner) and pass its word timings",
+    return FacegenError(f"the transcript does not match the speech ({detail}): check the transcript; the "
+                        "aligner knows English only, so for speech in another language align it with a tool "
+                        "for that language (e.g. the Montreal Forced Aligner) and pass its word timings",
                         param="alignment")
 
 
-def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray, free: np.ndarray) -> None:
+def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray,
+                 free: np.ndarray) -> None:
     """Raise if the alignment shows that the transcript is not what was said.
 
     Two signs, measured on synthetic speech (12 sentences and a paragraph, 14 voices, clean, 10 and
@@ -329,7 +332,8 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
                 if last:
                     raise _mismatch("no alignment of its words to the audio exists")
                 chosen = {i for i in chosen if i < p} | ({p} if any(i >= p for i in chosen) else set())
-                spans[p:] = [(start, n_frames)]  # a piece whose words cannot be told apart: align the rest at once
+                # a piece whose words cannot be told apart: align the rest at once
+                spans[p:] = [(start, n_frames)]
                 continue
             decoder, segments = found
             kept = segments[back:] if last else [s for s in segments[back:] if s[1] < cut - origin]

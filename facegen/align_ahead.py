@@ -1,4 +1,5 @@
-"""Forced alignment started ahead, in a process of its own, while the caller imports torch and loads the model.
+"""Forced alignment started ahead, in a process of its own, while the caller imports torch and loads the
+model.
 
 A new `facegen animate` spends its first second or more importing torch and loading the bundle, and as long
 again aligning the transcript: pocketsphinx holds the GIL, so a thread cannot overlap the two, but a forked

@@ -78,7 +78,7 @@ class Animator:
         self._backend = None
         self._ahead: tuple[tuple, AlignAhead] | None = None
 
-    # ------------------------------------------------------------------------------------------ the run's parts
+    # ---------------------------------------------------------------------------------------- the run's parts
 
     @property
     def device(self):
@@ -110,7 +110,8 @@ class Animator:
         return self._backend
 
     def mesh(self, template: str | os.PathLike | Mesh | None = None) -> Mesh:
-        """The face to animate: the bundle's template, or a user mesh of the same topology (refused otherwise)."""
+        """The face to animate: the bundle's template, or a user mesh of the same topology (refused
+        otherwise)."""
         base = self.bundle.template
         if template is None:
             return base
@@ -129,9 +130,9 @@ class Animator:
     # --------------------------------------------------------------------------------- alignment ahead
 
     def align_ahead(self, audio, *, text: str | None, alignment=None, no_text: bool = False) -> None:
-        """Start the forced alignment of `text` to the audio file `audio` in a process of its own, when the clip
-        will be force-aligned and the model is not loaded yet (torch not imported: align_ahead.py); `prepare`
-        of the same clip takes its answer. Does nothing where that gains nothing."""
+        """Start the forced alignment of `text` to the audio file `audio` in a process of its own, when the
+        clip will be force-aligned and the model is not loaded yet (torch not imported: align_ahead.py);
+        `prepare` of the same clip takes its answer. Does nothing where that gains nothing."""
         if self._ahead is not None or self._bundle is not None:
             return
         if not force_aligned(text, alignment, no_text) or not Path(audio).is_file():
@@ -238,15 +239,18 @@ class Animator:
         one packed batch (each clip sees exactly its own frames, as alone)."""
         from facegen.inference import batch_decoder_states
 
-        return batch_decoder_states(self.bundle, [(c.mel, c.text_features, c.speaker, c.phones) for c in inputs],
+        return batch_decoder_states(self.bundle, [(c.mel, c.text_features, c.speaker, c.phones)
+                                                  for c in inputs],
                                     device=self.device)
 
     def frames(self, inputs: Sequence[NetworkInput], templates: Sequence[np.ndarray | None]) -> list:
-        """Each input's frames, template + offsets (offsets alone where its template is None), as FrameStreams:
-        the decoder states computed now, the output layer as a writer reads the frames (inference.py)."""
+        """Each input's frames, template + offsets (offsets alone where its template is None), as
+        FrameStreams: the decoder states computed now, the output layer as a writer reads the frames
+        (inference.py)."""
         from facegen.inference import frame_stream
 
-        return [frame_stream(self.bundle, st, t) for st, t in zip(self.states(inputs), templates, strict=True)]
+        return [frame_stream(self.bundle, st, t) for st, t in zip(self.states(inputs), templates,
+                                                                  strict=True)]
 
     def offsets(self, item: NetworkInput) -> np.ndarray:
         """The vertex offsets [T, V, 3] float32 of one input (evaluation against ground truth)."""

@@ -40,7 +40,8 @@ class FeatureConfig:
     def hop_length(self) -> int:
         hop = self.sample_rate / self.fps if self.fps > 0 else 0.5  # nan and <= 0 fps divide nothing
         if abs(hop - round(hop)) > 1e-9:
-            raise FacegenError(f"fps {self.fps} does not divide the sample rate {self.sample_rate}: choose another fps")
+            raise FacegenError(f"fps {self.fps} does not divide the sample rate {self.sample_rate}: choose "
+                               "another fps")
         return round(hop)
 
     def to_dict(self) -> dict:
@@ -63,7 +64,8 @@ def mel_filters(cfg: FeatureConfig) -> np.ndarray:
     """librosa's (Slaney) mel filterbank, [n_mels, 1 + n_fft // 2] float32."""
     from librosa.filters import mel
 
-    return mel(sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin, fmax=cfg.fmax).astype(np.float32)
+    return mel(sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin,
+               fmax=cfg.fmax).astype(np.float32)
 
 
 def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tuple[np.ndarray, int]:
@@ -90,7 +92,8 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
         data, sr = sf.read(handle, dtype="float32", always_2d=True)
     except sf.LibsndfileError as exc:
         raise FacegenError(
-            f"cannot read {name} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): {fix}"
+            f"cannot read {name} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): "
+            f"{fix}"
         ) from exc
     except (OSError, RuntimeError, TypeError) as exc:
         raise FacegenError(f"cannot read {name} as audio ({exc}): {fix}") from exc
@@ -101,7 +104,8 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
     return samples, int(sr)
 
 
-def write_wav(samples: np.ndarray, sample_rate: int, path: str | os.PathLike, subtype: str = "PCM_16") -> Path:
+def write_wav(samples: np.ndarray, sample_rate: int, path: str | os.PathLike,
+              subtype: str = "PCM_16") -> Path:
     """Write mono audio as a WAV file (16-bit PCM by default, samples clipped to [-1, 1]; "FLOAT" keeps
     them as they are). The one place audio is written; callers that need atomicity pass a temporary path."""
     import soundfile as sf

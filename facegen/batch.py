@@ -139,7 +139,8 @@ def _csv_rows(raw: str, path: Path) -> list[tuple[int, dict]]:
                                    f"header has {len(names)}: quote fields that contain commas")
             rows.append((reader.line_num, dict(zip(names, fields, strict=True))))
     except csv.Error as exc:
-        raise FacegenError(f"manifest {path}, line {reader.line_num}: not valid CSV ({exc}): fix that line") from exc
+        raise FacegenError(f"manifest {path}, line {reader.line_num}: not valid CSV ({exc}): fix that "
+                           "line") from exc
     return rows
 
 
@@ -150,7 +151,8 @@ def _check_columns(names: list[str], path: Path, line: int) -> None:
                            f"{', '.join(MANIFEST_COLUMNS)}")
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
-        raise FacegenError(f"manifest {path}, line {line}: column {', '.join(repeated)} given twice: keep one")
+        raise FacegenError(f"manifest {path}, line {line}: column {', '.join(repeated)} given twice: keep "
+                           "one")
 
 
 def _json_rows(raw: str, path: Path) -> list[tuple[int, dict]]:
@@ -199,7 +201,8 @@ def _json_lines(raw: str, path: Path) -> list[tuple[int, dict]]:
         try:
             item = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise FacegenError(f"manifest {path}, line {n}: not valid JSON ({exc.msg}): one object per line") from exc
+            raise FacegenError(f"manifest {path}, line {n}: not valid JSON ({exc.msg}): one object per "
+                               "line") from exc
         rows.append((n, _object(item, path, n)))
     return rows
 
@@ -271,7 +274,8 @@ def animate_many(jobs: Iterable[Job], *, animator: Animator | None = None, batch
 def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, window: int,
                    warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
     """animate_many's (job, Animation or FacegenError) with the (wall, CPU) seconds spent on each job's
-    preparation and its share of the network, and the notes said while preparing it (also passed to `warn`)."""
+    preparation and its share of the network, and the notes said while preparing it (also passed to
+    `warn`)."""
     pending: list[Job] = []
 
     def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object, float, list[str]]]:
@@ -304,7 +308,8 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
         for b in range(0, len(ready), batch_size):
             ids = ready[b:b + batch_size]
             t0 = _clocks()
-            for i, anim in zip(ids, animator.run([prepared[i] for i in ids], batch_size=batch_size), strict=True):
+            for i, anim in zip(ids, animator.run([prepared[i] for i in ids], batch_size=batch_size),
+                               strict=True):
                 prepared[i] = anim
                 seconds[i] += (_clocks() - t0) / len(ids)
         for i, job in enumerate(window_jobs):
@@ -362,9 +367,11 @@ def _validation(path: Path, anim) -> dict:
     from facegen.validate import validate
 
     report = validate(path, template=anim.mesh, fps=anim.fps)
-    return {"file": str(path), "ok": report.ok, "failures": [f"{c.name}: {c.detail}" for c in report.failures],
+    return {"file": str(path), "ok": report.ok, "failures": [f"{c.name}: {c.detail}"
+                                                             for c in report.failures],
             "warnings": [f"{c.name}: {c.detail}" for c in report.warnings]}
 
 
 def _failed(result: JobResult) -> str:
-    return "; ".join(f"{Path(v['file']).name}: {', '.join(v['failures'])}" for v in result.validation if not v["ok"])
+    return "; ".join(f"{Path(v['file']).name}: {', '.join(v['failures'])}" for v in result.validation
+                     if not v["ok"])

@@ -31,7 +31,8 @@ def _key(path: Path) -> str:
 
 
 def check_plan(jobs: list[Job], out_dir: str | os.PathLike) -> None:
-    """Refuse, before any work, a plan that would lose or misplace a clip (a FacegenError naming the lines)."""
+    """Refuse, before any work, a plan that would lose or misplace a clip (a FacegenError naming the
+    lines)."""
     out = Path(os.path.abspath(out_dir))
     reserved = {_key(out / name): name for name in (*REPORT_NAMES, STATE_NAME)}
     inputs: dict[str, int] = {}
@@ -50,22 +51,23 @@ def check_plan(jobs: list[Job], out_dir: str | os.PathLike) -> None:
                                    "relative path inside it (no '..', not absolute)")
             key = _key(path)
             if key in reserved:
-                raise FacegenError(f"{where}: output {target} is the batch's own {reserved[key]}: rename the output")
+                raise FacegenError(f"{where}: output {target} is the batch's own {reserved[key]}: rename the "
+                                   "output")
             if key in written:
                 raise FacegenError(f"{where}: output {target} is also the output of line {written[key]}: "
                                    "give every row its own output")
             if key in inputs:
-                raise FacegenError(f"{where}: output {target} is an input of line {inputs[key]}: writing it would "
-                                   "destroy that input; choose another output name")
+                raise FacegenError(f"{where}: output {target} is an input of line {inputs[key]}: writing it "
+                                   "would destroy that input; choose another output name")
             written[key] = job.line
             wav = _key(sidecar_path(path))
             if sidecars.setdefault(wav, job.line) != job.line:
-                raise FacegenError(f"{where}: output {target} shares its audio sidecar {sidecar_path(target).name} "
-                                   f"with line {sidecars[wav]} (same folder and name): give the rows different "
-                                   "names")
+                raise FacegenError(f"{where}: output {target} shares its audio sidecar "
+                                   f"{sidecar_path(target).name} with line {sidecars[wav]} (same folder and "
+                                   "name): give the rows different names")
             if wav in inputs and inputs[wav] != job.line:
-                raise FacegenError(f"{where}: the audio sidecar of {target} would overwrite the audio of line "
-                                   f"{inputs[wav]}: choose another output name")
+                raise FacegenError(f"{where}: the audio sidecar of {target} would overwrite the audio of "
+                                   f"line {inputs[wav]}: choose another output name")
 
 
 def file_hash(path: str | os.PathLike) -> str:
@@ -113,7 +115,8 @@ class RunState:
             data = json.loads(state.path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return state
-        if isinstance(data, dict) and data.get("version") == STATE_VERSION and isinstance(data.get("items"), dict):
+        if isinstance(data, dict) and data.get("version") == STATE_VERSION and isinstance(data.get("items"),
+                                                                                          dict):
             state.items = data["items"]
         return state
 
@@ -128,8 +131,8 @@ class RunState:
         return all(_stamp(self.out_dir / f) == stamp for f, stamp in entry.get("files", {}).items())
 
     def record(self, result: JobResult, key: str) -> None:
-        """Note a finished item: a passed one is done, a skipped one stays done; any other is forgotten (it runs
-        again next time)."""
+        """Note a finished item: a passed one is done, a skipped one stays done; any other is forgotten (it
+        runs again next time)."""
         name = self.name(result.job)
         if result.status == "skipped":
             return
@@ -141,7 +144,8 @@ class RunState:
 
     def save(self) -> None:
         with atomic_path(self.path) as tmp:
-            tmp.write_text(json.dumps({"version": STATE_VERSION, "items": self.items}, indent=0), encoding="utf-8")
+            tmp.write_text(json.dumps({"version": STATE_VERSION, "items": self.items}, indent=0),
+                           encoding="utf-8")
 
 
 def _stamp(path: str | os.PathLike) -> list[int] | None:

@@ -27,12 +27,13 @@ def counts(results: list[JobResult]) -> dict[str, int]:
 
 
 def summary_line(results: list[JobResult], seconds: float, out_dir: str | os.PathLike) -> str:
-    """e.g. "20 items in 6.1 s: 18 passed, 1 failed, 1 error, 0 skipped (16.2x real time); reports in out/"."""
+    """e.g. "20 items in 6.1 s: 18 passed, 1 failed, 1 error, 0 skipped (16.2x real time); reports in
+    out/"."""
     c = counts(results)
     audio = sum(r.audio_seconds for r in results if r.status != "skipped")
     speed = f" ({audio / seconds:.1f}x real time)" if audio and seconds > 0 else ""
-    return (f"{len(results)} items in {seconds:.1f} s: {c['passed']} passed, {c['failed']} failed, {c['error']} error"
-            f"{'s' if c['error'] != 1 else ''}, {c['skipped']} skipped{speed}; reports in "
+    return (f"{len(results)} items in {seconds:.1f} s: {c['passed']} passed, {c['failed']} failed, "
+            f"{c['error']} error{'s' if c['error'] != 1 else ''}, {c['skipped']} skipped{speed}; reports in "
             f"{Path(out_dir) / 'report.json'} and report.xml")
 
 
@@ -46,7 +47,8 @@ def item_dict(result: JobResult, out_dir: str | os.PathLike) -> dict:
             "outputs": [os.path.relpath(t, out_dir) for t in job.targets], "status": result.status,
             "error": result.error, "files": [os.path.relpath(f, out_dir) for f in result.files],
             "frames": result.frames, "audio_seconds": round(result.audio_seconds, 3),
-            "seconds": round(result.seconds, 3), "cpu_seconds": round(result.cpu_seconds, 3), "validation": result.validation, "notes": result.notes}
+            "seconds": round(result.seconds, 3), "cpu_seconds": round(result.cpu_seconds, 3),
+            "validation": result.validation, "notes": result.notes}
 
 
 def write_reports(results: list[JobResult], out_dir: str | os.PathLike, run: dict) -> tuple[Path, Path]:
@@ -86,7 +88,8 @@ def junit(results: list[JobResult], out_dir: Path, run: dict) -> ET.ElementTree:
                 "\n".join(f"{v['file']}: FAIL {f}" for v in bad for f in v["failures"]))
         elif r.status == "skipped":
             ET.SubElement(case, "skipped", {"message": "unchanged since the last run (validated then)"})
-        lines = [f"{v['file']}: {'ok' if v['ok'] else 'FAILED'}" + "".join(f"\n  WARN {w}" for w in v["warnings"])
+        lines = [f"{v['file']}: {'ok' if v['ok'] else 'FAILED'}" + "".join(f"\n  WARN {w}"
+                                                                           for w in v["warnings"])
                  for v in r.validation] + [f"note: {n}" for n in r.notes]
         if lines:
             ET.SubElement(case, "system-out").text = _text("\n".join(lines))

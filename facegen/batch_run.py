@@ -109,7 +109,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
             to_run.append(job)
     if on_plan is not None:
         on_plan(len(all_jobs), len(to_run))
-    index = {(job.line, job.output): i for i, job in enumerate(all_jobs)}  # results may come from other processes
+    # results may come from other processes
+    index = {(job.line, job.output): i for i, job in enumerate(all_jobs)}
     last_save = time.monotonic()
 
     def finished(result: JobResult) -> None:

@@ -25,7 +25,8 @@ from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
 
-if TYPE_CHECKING:  # torch is imported by what loads or saves weights: `facegen info` reads metadata without it
+# torch is imported by what loads or saves weights: `facegen info` reads metadata without it
+if TYPE_CHECKING:
     import torch
 
     from facegen.model import FaceModel, ModelConfig
@@ -130,7 +131,8 @@ def save_bundle(bundle: Bundle, path: str | os.PathLike, precision: str = "fp32"
     tensors: dict[str, torch.Tensor] = {}
     for k, v in bundle.model.state_dict().items():
         tensors.update(_compress(f"model.{k}", v.detach().cpu().contiguous(), precision))
-    tensors["template.vertices"] = torch.from_numpy(np.ascontiguousarray(bundle.template.vertices, np.float32))
+    tensors["template.vertices"] = torch.from_numpy(np.ascontiguousarray(bundle.template.vertices,
+                                                                         np.float32))
     tensors["template.faces"] = torch.from_numpy(np.ascontiguousarray(bundle.template.faces, np.int32))
     for name, idx in bundle.template.regions.items():
         tensors[f"region.{name}"] = torch.from_numpy(np.ascontiguousarray(idx, np.int64))
@@ -163,7 +165,8 @@ def read_metadata(path: str | os.PathLike) -> dict:
     try:
         meta = json.loads(raw)
     except json.JSONDecodeError as exc:
-        raise FacegenError(f"model bundle {path} has corrupt metadata ({exc}): re-train or re-export it") from exc
+        raise FacegenError(f"model bundle {path} has corrupt metadata ({exc}): re-train or re-export "
+                           "it") from exc
     if meta.get("format_version", 0) > FORMAT_VERSION:
         raise FacegenError(
             f"model bundle {path} has format version {meta['format_version']}, newer than this facegen "
@@ -191,7 +194,8 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
     try:
         tensors = load_file(str(path))
     except Exception as exc:
-        raise FacegenError(f"model bundle {path} is corrupt or truncated ({exc}): re-download or re-train it") from exc
+        raise FacegenError(f"model bundle {path} is corrupt or truncated ({exc}): re-download or re-train "
+                           "it") from exc
     try:
         cfg = ModelConfig.from_dict(meta["model_config"])
         with torch.device("meta"):  # no storage, no random init: the weights are assigned below (0.1 s less)
@@ -223,9 +227,11 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
             path=path,
         )
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
-        raise FacegenError(f"model bundle {path} is incomplete or inconsistent ({exc}): re-train or re-export it") from exc
+        raise FacegenError(f"model bundle {path} is incomplete or inconsistent ({exc}): re-train or "
+                           "re-export it") from exc
     if bundle.fingerprint != meta["topology"]["fingerprint"]:
-        raise FacegenError(f"model bundle {path} has a template that does not match its topology fingerprint: re-export it")
+        raise FacegenError(f"model bundle {path} has a template that does not match its topology "
+                           "fingerprint: re-export it")
     return bundle
 
 

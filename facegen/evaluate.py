@@ -145,7 +145,8 @@ class Run:
                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Offsets [T, V, 3] of `item` conditioned on speaker `condition`; with `encoders`, also the
         encoder outputs ("audio" Ha [T, 128] and/or "text" Hl [T, 64]) as float32 arrays."""
-        inputs = NetworkInput(item.mel, item.text, condition, item.phones if self.bundle.config.n_phones else None)
+        inputs = NetworkInput(item.mel, item.text, condition, item.phones if self.bundle.config.n_phones
+                              else None)
         return self.animator.offsets(inputs), self.animator.encoders(inputs) if encoders else {}
 
 
@@ -202,8 +203,8 @@ def prepare(
                 dataset.bad(it.name, str(exc))
         items = usable
         if not items:
-            raise FacegenError(f"no sequence of split {split} in {dataset.root} has phone timings or a transcript "
-                               "for this model's phone stream: add text/ transcripts")
+            raise FacegenError(f"no sequence of split {split} in {dataset.root} has phone timings or a "
+                               "transcript for this model's phone stream: add text/ transcripts")
     lips = _region(dataset, bundle, LIPS, num_vertices)
     upper = _region(dataset, bundle, UPPER_FACE, num_vertices)
     bundle.model.eval()
@@ -287,7 +288,8 @@ def _lipsync_row(item: Item, pred: np.ndarray, gt: np.ndarray, geometry, fps: fl
             speech = speech_mask(phones or timed, item.num_frames, fps) if (phones or timed) else None
             if phones:
                 bilabials = bilabial_midpoints(phones, fps, data.get("alphabet", "cmu"))
-    return lipsync_metrics(pred, gt, geometry, fps, speech=speech, bilabials=bilabials, rest_pose=item.template)
+    return lipsync_metrics(pred, gt, geometry, fps, speech=speech, bilabials=bilabials,
+                           rest_pose=item.template)
 
 
 def format_table(result: dict) -> str:

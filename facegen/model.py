@@ -56,7 +56,8 @@ class AudioEncoder(nn.Module):
         self.act = nn.LeakyReLU(cfg.leaky_slope)
         self.fc = nn.Linear(cfg.conv_channels + cfg.num_speakers, cfg.audio_dim)
 
-    def forward(self, mel: torch.Tensor, speaker: torch.Tensor, phones: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, mel: torch.Tensor, speaker: torch.Tensor,
+                phones: torch.Tensor | None = None) -> torch.Tensor:
         """mel [B,T,n_mels] (standardised), speaker one-hot [B,S], phones [B,T,P] one-hot (when the
         model uses them) → Ha [B,T,audio_dim]."""
         h = self.inp(mel.transpose(1, 2))
@@ -165,7 +166,8 @@ class FaceModel(nn.Module):
 
     def forward(self, mel: torch.Tensor | None, text: torch.Tensor | None,
                 speaker: torch.Tensor, phones: torch.Tensor | None = None) -> torch.Tensor:
-        """mel [B,T,n_mels], text [B,T,text_dim], speaker one-hot [B,S] (phones [B,T,P]) → offsets [B,T,V,3]."""
+        """mel [B,T,n_mels], text [B,T,text_dim], speaker one-hot [B,S] (phones [B,T,P]) → offsets
+        [B,T,V,3]."""
         out = self.fc_out(self.decoder_states(self.decoder_input(mel, text, speaker, phones=phones)))
         if self.cfg.output_basis:
             out = out @ self.basis.T + self.basis_mean
@@ -173,7 +175,8 @@ class FaceModel(nn.Module):
 
     def coefficients(self, mel: torch.Tensor | None, text: torch.Tensor | None,
                      speaker: torch.Tensor, phones: torch.Tensor | None = None) -> torch.Tensor:
-        """The output in the PCA basis, [B,T,K] (models with `output_basis` only): offsets = basis @ c + mean."""
+        """The output in the PCA basis, [B,T,K] (models with `output_basis` only): offsets = basis @ c +
+        mean."""
         if not self.cfg.output_basis:
             raise ValueError("coefficients() needs a model with output_basis > 0")
         return self.fc_out(self.decoder_states(self.decoder_input(mel, text, speaker, phones=phones)))

@@ -36,7 +36,8 @@ def offsets(item, frames: slice | None = None) -> np.ndarray:
 
 
 def fit_basis(items: Sequence, k: int, *, seed: int = 0, max_frames: int = MAX_FRAMES) -> tuple[np.ndarray,
-                                                                                                 np.ndarray, float]:
+                                                                                                 np.ndarray,
+                                                                                                float]:
     """(basis [3V, K] float32 with orthonormal columns, mean [3V] float32, share of the motion's variance it
     keeps) from up to `max_frames` frames spread evenly over the training `items`."""
     total = sum(it.num_frames for it in items)
@@ -83,7 +84,8 @@ class CoefficientLoss:
         self.velocity_weight = float(velocity_weight)
         self.regions = []  # (weight, basis rows of the region's coordinates)
         if lip_weight > 0:
-            self.regions.append((float(lip_weight), _rows(basis, lips, "lip_weight", "lip region (regions/lve.txt)",
+            self.regions.append((float(lip_weight), _rows(basis, lips, "lip_weight", "lip region "
+                                                                                     "(regions/lve.txt)",
                                                           device)))
         if upper_weight > 0:
             self.regions.append((float(upper_weight), _rows(basis, upper, "upper_weight",

@@ -187,8 +187,8 @@ def check_text_dim(backend: TextBackend, expected: int, trained_with: str) -> No
     """Refuse a text backend whose features are not the `expected` size a model was trained on (with the
     backend `trained_with`, the bundle's text_backend): FacegenError naming both."""
     if backend.dim != expected:
-        raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was trained "
-                           f"on {expected}-d ({trained_with}): pass the matching text model",
+        raise FacegenError(f"text model {backend.id} gives {backend.dim}-d features but the model was "
+                           f"trained on {expected}-d ({trained_with}): pass the matching text model",
                            param="text_model")
 
 
@@ -280,7 +280,8 @@ def _load(backend_id: str, source: str) -> TextBackend:
 
 def _hf_tokens(tokenizer, text: str) -> Tokens:
     """A transformers fast tokenizer's ids, special-token mask and character offsets for `text`."""
-    enc = tokenizer(text, add_special_tokens=True, return_offsets_mapping=True, return_special_tokens_mask=True,
+    enc = tokenizer(text, add_special_tokens=True, return_offsets_mapping=True,
+                    return_special_tokens_mask=True,
                     return_attention_mask=False, return_token_type_ids=False)
     return Tokens(np.asarray(enc["input_ids"], np.int64), np.asarray(enc["special_tokens_mask"], bool),
                   np.asarray(enc["offset_mapping"], np.int64).reshape(-1, 2))

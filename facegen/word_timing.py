@@ -20,7 +20,8 @@ FORCED, FILE, RECOGNISED, NONE = "forced alignment", "alignment file", "speech r
 
 
 def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
-    """Whether a clip's words come from forced alignment of `text` (not an alignment file, not recognition)."""
+    """Whether a clip's words come from forced alignment of `text` (not an alignment file, not
+    recognition)."""
     return text is not None and bool(text.strip()) and alignment is None and not no_text
 
 
@@ -43,8 +44,8 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
         _check_transcript(text)
         progress("aligning the transcript to the speech (pocketsphinx)")
         return forced(samples, sr, text, ahead, with_phones=False)[0], FORCED
-    warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a transcript; "
-         "pass --text, --text-file or --alignment for better upper-face motion)")
+    warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
+         "transcript; pass --text, --text-file or --alignment for better upper-face motion)")
     return align.recognize(samples, sr), RECOGNISED
 
 

@@ -70,7 +70,8 @@ class _Deformers:
 
     def nearest_pair(self, candidates: np.ndarray, dx: float, dy: float) -> np.ndarray:
         """Two vertices of `candidates`: the one nearest (in x, y) to the point dx, dy cm from the mouth
-        centre (dx > 0: on the left), and the one nearest to its mirror image (the same on a symmetric face)."""
+        centre (dx > 0: on the left), and the one nearest to its mirror image (the same on a symmetric
+        face)."""
         def nearest(target: np.ndarray) -> int:
             return int(candidates[np.argmin(np.linalg.norm(self.t[candidates, :2] - target, axis=1))])
 
@@ -136,7 +137,8 @@ def _jaw(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthClose"] = d.pose(jaw_open=1.0, lip_close=1.0) - d.pose(jaw_open=1.0)
     # no tongue on this face: the small jaw drop and the lips parting a tongue pushed out would cause
     w_lo = d.field(d.f["d_lo"], 2.0, ~d.f["upper_side"])
-    # no tongue on this face: the lower lip pushed out and down as a tongue over it would (no jaw: that is jawOpen)
+    # no tongue on this face: the lower lip pushed out and down as a tongue over it would (no jaw: that is
+    # jawOpen)
     out["tongueOut"] = d.vec(dy=-0.2 * w_lo * d.f["lat"], dz=0.45 * w_lo * d.f["lat"])
 
 
@@ -150,7 +152,8 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthPucker"] = d.delta(lip_round=1.0)
     out["mouthRollLower"] = d.delta(lower_lip_tuck=1.0)
     # the upper lip's margin curls in over the teeth (down and back), the skin above it hardly moves
-    out["mouthRollUpper"] = d.vec(dy=-0.25 * near * upper * lat - 0.05 * w_lo * lat, dz=-0.4 * near * upper * lat)
+    out["mouthRollUpper"] = d.vec(dy=-0.25 * near * upper * lat - 0.05 * w_lo * lat,
+                                  dz=-0.4 * near * upper * lat)
     wide = d.field(f["d_m"], 3.2)
     out["mouthLeft"] = d.vec(dx=0.8 * wide, dz=-0.1 * wide * np.tanh(X / 1.5))
     out["mouthRight"] = d.vec(dx=-0.8 * wide, dz=0.1 * wide * np.tanh(X / 1.5))

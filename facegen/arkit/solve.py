@@ -1,4 +1,5 @@
-"""The ARKit solver: per-frame weights of the 52 ARKit shapes that best reproduce an animation of facegen's face.
+"""The ARKit solver: per-frame weights of the 52 ARKit shapes that best reproduce an animation of facegen's
+face.
 
 For frame offsets d_t (the frame minus the template) and shape offsets S ([3V, 52], `Shapes.offsets`), the
 weights W ([T, 52]) minimise
@@ -41,7 +42,8 @@ ERROR_FRAMES = 16  # frames per step of the error pass
 @dataclass(frozen=True)
 class Fit:
     """ARKit weights of an animation: `weights` [T, 52] float32 in [0, 1] for `names` (ARKit's, in order) of
-    `shapes`; the mean per-vertex reconstruction error over all frames on the lips and the whole face, in mm."""
+    `shapes`; the mean per-vertex reconstruction error over all frames on the lips and the whole face, in
+    mm."""
 
     names: tuple[str, ...]
     weights: np.ndarray
@@ -50,16 +52,19 @@ class Fit:
     face_error_mm: float
 
 
-def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *, shapes: Shapes | None = None) -> Fit:
+def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *,
+              shapes: Shapes | None = None) -> Fit:
     """The ARKit weights of `anim` (an animation of facegen's face, arrays or a stream); `shapes` defaults to
-    the ARKit shapes built on the animation's template (a mesh without the rig's regions is a FacegenError)."""
+    the ARKit shapes built on the animation's template (a mesh without the rig's regions is a
+    FacegenError)."""
     check_animation(anim)
     if not (np.isfinite(smoothness) and smoothness >= 0):
         raise FacegenError(f"ARKit fit smoothness must be a number >= 0, got {smoothness}")
     shapes = shapes if shapes is not None else arkit_shapes(anim.mesh)
     lips = anim.regions.get("lips")
     if lips is None or len(lips) == 0:
-        raise FacegenError("the animation's template has no 'lips' region: use a template with facegen's regions")
+        raise FacegenError("the animation's template has no 'lips' region: use a template with facegen's "
+                           "regions")
     offsets = np.asarray(shapes.offsets, np.float32)
     if offsets.shape[1:] != (anim.num_vertices, 3):
         raise FacegenError(f"the ARKit shapes have {offsets.shape[1]} vertices but the animation has "
@@ -70,7 +75,8 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *, shapes
     rhs = np.empty((anim.num_frames, len(basis)), np.float64)
     with threads(1, ("blas",)):  # a busy machine: threads only add waiting
         gram = (basis @ basis.T).astype(np.float64) * scale
-        keep = anim.num_frames * anim.num_vertices * 12 <= KEEP_BYTES  # else the errors' pass reads them again
+        # else the errors' pass reads them again
+        keep = anim.num_frames * anim.num_vertices * 12 <= KEEP_BYTES
         kept = []
         for start, block in anim.frame_blocks(BLOCK_FRAMES):
             rhs[start : start + len(block)] = (block.reshape(len(block), -1) - rest) @ basis.T * scale
@@ -124,7 +130,8 @@ def _norm(x: np.ndarray) -> float:
     return float(np.sqrt(np.vdot(x, x)))
 
 
-def fit_errors(anim: Animation, blocks: Iterable[tuple[int, np.ndarray]], basis: np.ndarray, weights: np.ndarray,
+def fit_errors(anim: Animation, blocks: Iterable[tuple[int, np.ndarray]], basis: np.ndarray,
+               weights: np.ndarray,
                lips: np.ndarray) -> tuple[float, float]:
     """Mean per-vertex distance (mesh units) between the posed weights (`basis` [K, 3V] in mesh units) and the
     animation's frames (`blocks` as `anim.frame_blocks()` yields them) over all frames: on the `lips`
@@ -132,7 +139,8 @@ def fit_errors(anim: Animation, blocks: Iterable[tuple[int, np.ndarray]], basis:
     rest = np.asarray(anim.template, np.float32).reshape(-1)
     lip_sum = face_sum = 0.0
     for start, block in blocks:
-        for first in range(0, len(block), ERROR_FRAMES):  # a few frames at a time: the residual stays in cache
+        # a few frames at a time: the residual stays in cache
+        for first in range(0, len(block), ERROR_FRAMES):
             frames = block[first : first + ERROR_FRAMES]
             residual = weights[start + first : start + first + len(frames)] @ basis
             residual += rest

@@ -18,13 +18,14 @@ class FACEGEN_OT_import(bpy.types.Operator, ImportHelper):
     bl_label = "Import facegen animation"
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012 (Blender reads it as a set)
 
-    filter_glob: StringProperty(default="*.glb;*.gltf;*.usd;*.usda;*.usdc;*.usdz;*.json;*.csv", options={"HIDDEN"})
-    target: StringProperty(name="Target", description="ARKit weights (.json/.csv): the object whose ARKit-named "
-                           "shape keys get them (empty: the active object)", default="")
+    filter_glob: StringProperty(default="*.glb;*.gltf;*.usd;*.usda;*.usdc;*.usdz;*.json;*.csv",
+                                options={"HIDDEN"})
+    target: StringProperty(name="Target", description="ARKit weights (.json/.csv): the object whose "
+                           "ARKit-named shape keys get them (empty: the active object)", default="")
     fps: FloatProperty(name="FPS", description="Frame rate when the file states none (0: the file's)",
                        default=0.0, min=0.0)
-    sound: BoolProperty(name="Sound strip", description="Add the clip's sound (the WAV beside the file, else the "
-                        "one inside it) as a sound strip", default=True)
+    sound: BoolProperty(name="Sound strip", description="Add the clip's sound (the WAV beside the file, else "
+                        "the one inside it) as a sound strip", default=True)
 
     def execute(self, context):
         target = None

@@ -61,7 +61,8 @@ def read_weights(path: str | Path, fps: float | None = None) -> dict:
     elif suffix == ".csv":
         clip = _read_csv(path, fps)
     else:
-        raise ValueError(f"{path.name}: ARKit weights are read from .json (Audio2Face) or .csv (Live Link Face)")
+        raise ValueError(f"{path.name}: ARKit weights are read from .json (Audio2Face) or .csv (Live Link "
+                         "Face)")
     if not np.isfinite(clip["weights"]).all():
         raise ValueError(f"{path.name}: the weights hold NaN or infinite values")
     audio = clip.pop("audio_name", None)
@@ -76,8 +77,8 @@ def _columns(path: Path, names: list[str]) -> tuple[list[str], list[int]]:
     found = [(n, i) for n, i in found if n is not None]
     if not found:
         shown = ", ".join(names[:4]) + (", ..." if len(names) > 4 else "")
-        raise ValueError(f"{path.name}: not ARKit-shaped: none of its shape names ({shown or 'none'}) is one of "
-                         "ARKit's 52 (eyeBlinkLeft ... tongueOut)")
+        raise ValueError(f"{path.name}: not ARKit-shaped: none of its shape names ({shown or 'none'}) is one "
+                         "of ARKit's 52 (eyeBlinkLeft ... tongueOut)")
     return [n for n, _ in found], [i for _, i in found]
 
 
@@ -128,7 +129,8 @@ def _read_csv(path: Path, fps: float | None) -> dict:
         if found is None or len(row) < len(header):
             raise ValueError(f"{shape}: row {number} has {len(row)} of {len(header)} columns or a Timecode "
                              f"{row[0]!r} that is not HH:MM:SS:FF.mmm")
-        stamps.append([int(found.group(i)) for i in range(1, 5)] + [int((found.group(5) or "0")[:3].ljust(3, "0"))])
+        stamps.append([int(found.group(i)) for i in range(1, 5)]
+                      + [int((found.group(5) or "0")[:3].ljust(3, "0"))])
     try:
         weights = np.array([[float(row[c]) for c in columns] for row in rows[1:]], dtype=np.float64)
     except ValueError as exc:
@@ -137,13 +139,14 @@ def _read_csv(path: Path, fps: float | None) -> dict:
     seconds = (stamps[:, 0] * 60 + stamps[:, 1]) * 60 + stamps[:, 2]
     if fps is None:
         if len(np.unique(seconds)) < 2:
-            raise ValueError(f"{path.name}: its Timecodes stay within one second, which does not tell the frame "
-                             "rate: pass --fps")
+            raise ValueError(f"{path.name}: its Timecodes stay within one second, which does not tell the "
+                             "frame rate: pass --fps")
         fps = float(stamps[:, 3].max() + 1)
     whole = seconds * round(fps) + stamps[:, 3]
     # ".mmm" is a sub-frame: only used when rows share a whole frame (e.g. 60 Hz rows on a 30 fps timecode)
     frames = whole + stamps[:, 4] / 1000.0 if len(np.unique(whole)) < len(whole) else whole.astype(np.float64)
-    return {"names": ark, "weights": weights, "frames": frames - frames[0], "fps": float(fps), "audio_name": None}
+    return {"names": ark, "weights": weights, "frames": frames - frames[0], "fps": float(fps),
+            "audio_name": None}
 
 
 # ---- keying (bpy) ------------------------------------------------------------------------------------------
@@ -164,8 +167,8 @@ def arkit_keys(obj) -> dict[str, list]:
 
 def key_shapes(objects, clip: dict, name: str = "facegen ARKit") -> dict:
     """Key `clip`'s weights (from read_weights) onto the ARKit-named shape keys of `objects`: one new action
-    per object's shape keys. Returns {"matched": {ARKit name: ["object/key", ...]}, "unmatched": ARKit names of
-    the clip no shape key stands for, "keys": number of F-curves written}. Raises ValueError (one line) for
+    per object's shape keys. Returns {"matched": {ARKit name: ["object/key", ...]}, "unmatched": ARKit names
+    of the clip no shape key stands for, "keys": number of F-curves written}. Raises ValueError (one line) for
     an object without any ARKit-named shape key."""
     found = {}
     for obj in objects:
@@ -174,8 +177,8 @@ def key_shapes(objects, clip: dict, name: str = "facegen ARKit") -> dict:
             keys = getattr(obj.data, "shape_keys", None) if obj.data is not None else None
             have = ", ".join(b.name for b in keys.key_blocks) if keys is not None else ""
             has = f"its shape keys are {have}" if have else "it has no shape keys"
-            raise ValueError(f"object {obj.name!r} has no shape key named like ARKit's (jawOpen, eyeBlinkLeft, "
-                             f"blendShape1.mouthSmile_L, ...): {has}")
+            raise ValueError(f"object {obj.name!r} has no shape key named like ARKit's (jawOpen, "
+                             f"eyeBlinkLeft, blendShape1.mouthSmile_L, ...): {has}")
         found[obj] = blocks
     column: dict[str, int] = {}
     for i, shape in enumerate(clip["names"]):

@@ -156,7 +156,8 @@ def _usd_info(path: Path) -> dict:
     _, Usd, UsdMedia = pxr
     stage = Usd.Stage.Open(str(path))
     layer = stage.GetRootLayer()
-    fps = stage.GetTimeCodesPerSecond() if (layer.HasTimeCodesPerSecond() or layer.HasFramesPerSecond()) else None
+    fps = stage.GetTimeCodesPerSecond() if (layer.HasTimeCodesPerSecond()
+                                            or layer.HasFramesPerSecond()) else None
     start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
     frames = round(end - start) + 1 if layer.HasStartTimeCode() and layer.HasEndTimeCode() else None
     audio, embedded = None, None
@@ -302,7 +303,8 @@ def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]
         result = bpy.ops.import_scene.gltf(filepath=str(path))
     else:
         set_scene_fps(scene, rate)
-        result = bpy.ops.wm.usd_import(filepath=str(path), set_frame_range=True, apply_unit_conversion_scale=True)
+        result = bpy.ops.wm.usd_import(filepath=str(path), set_frame_range=True,
+                                       apply_unit_conversion_scale=True)
     set_scene_fps(scene, rate)
     if "FINISHED" not in result:
         raise RuntimeError(f"Blender could not import {path} ({result})")
@@ -403,7 +405,8 @@ def add_sound(scene, wav: str | os.PathLike, channel: int = 1, frame_start: int 
 def remove_sound(scene) -> None:
     """Remove facegen's sound strip (of an earlier import), if there is one."""
     editor = scene.sequence_editor
-    strips = (editor.strips if hasattr(editor, "strips") else editor.sequences) if editor is not None else None
+    strips = (editor.strips if hasattr(editor, "strips")
+              else editor.sequences) if editor is not None else None
     old = strips.get(SOUND_STRIP) if strips is not None else None
     if old is not None:
         strips.remove(old)
@@ -432,13 +435,15 @@ def main(argv: list[str] | None = None) -> dict:
     if args.empty:
         bpy.ops.wm.read_factory_settings(use_empty=True)
     try:
-        done = import_file(args.file, fps=args.fps, audio=args.audio, sound=not args.no_sound, target=args.target)
+        done = import_file(args.file, fps=args.fps, audio=args.audio, sound=not args.no_sound,
+                           target=args.target)
     except (OSError, RuntimeError, ValueError) as exc:
         raise SystemExit(f"facegen_import: error: {exc}") from None
     for line in done["warnings"]:
         print(f"facegen_import: warning: {line}")
     if done.get("unmatched"):
-        print(f"facegen_import: no shape key for {len(done['unmatched'])} ARKit shapes: {', '.join(done['unmatched'])}")
+        print(f"facegen_import: no shape key for {len(done['unmatched'])} ARKit shapes: "
+              f"{', '.join(done['unmatched'])}")
     if args.save:
         bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.save).resolve()))
     print("facegen_import: " + json.dumps(done))

@@ -120,7 +120,8 @@ class Dataset:
             raise FacegenError(f"dataset folder {self.root} does not exist: pass a folder with wav/ and "
                                "vertices_npy/ (the BIWI community layout)")
         for sub in ("wav", "vertices_npy"):
-            if not (self.root / sub).is_dir() and not (sub == "vertices_npy" and (self.root / "curves").is_dir()):
+            if not (self.root / sub).is_dir() and not (sub == "vertices_npy"
+                                                       and (self.root / "curves").is_dir()):
                 raise FacegenError(f"{self.root} has no {sub}/ folder: pass a dataset in the BIWI community "
                                    "layout (wav/, vertices_npy/, templates.pkl, BIWI.ply)")
         if on_bad not in ("skip", "fail"):
@@ -277,7 +278,8 @@ class Dataset:
         except (OSError, ValueError, EOFError) as exc:
             raise BadSequence(f"{seq.curves.name} is not a readable .npy file ({exc})") from exc
         if arr.ndim != 2 or arr.shape[1] != len(CHANNELS) or arr.shape[0] == 0 or not np.isfinite(arr).all():
-            raise BadSequence(f"{seq.curves.name} has shape {arr.shape}: not [T, {len(CHANNELS)}] finite rig curves")
+            raise BadSequence(f"{seq.curves.name} has shape {arr.shape}: not [T, {len(CHANNELS)}] finite rig "
+                              "curves")
         return int(arr.shape[0])
 
     def pose(self, subject: str) -> Callable[[np.ndarray], np.ndarray]:
@@ -321,8 +323,8 @@ class Dataset:
                 raise BadSequence(f"alignments/{seq.name}.json has malformed phones ({exc})") from exc
             return phone_frames(phones, num_frames, fps, data.get("alphabet", "cmu"))
         if seq.text is None:
-            raise BadSequence(f"no phones in alignments/{seq.name}.json and no transcript text/{seq.name}.txt "
-                              "to align them from, for the phone stream")
+            raise BadSequence(f"no phones in alignments/{seq.name}.json and no transcript "
+                              f"text/{seq.name}.txt to align them from, for the phone stream")
         key = digest([stat_key(seq.wav), stat_key(seq.text)])
         cached = self.cache_dir / "phones" / f"{seq.name}-{key}.json"
         if not cached.is_file():
@@ -331,7 +333,8 @@ class Dataset:
 
             samples, sr = read_sequence_audio(seq)
             try:
-                words, found = align.align_phones(samples, sr, seq.text.read_text(encoding="utf-8", errors="replace"))
+                words, found = align.align_phones(samples, sr, seq.text.read_text(encoding="utf-8",
+                                                                                  errors="replace"))
             except FacegenError as exc:
                 raise BadSequence(f"its phones could not be aligned ({exc})") from exc
             cached.parent.mkdir(parents=True, exist_ok=True)

@@ -96,9 +96,9 @@ def _vl_frames(source: Path) -> list[tuple[str, bytes]] | None:
         nonlocal total
         total += size
         if size > MAX_VL_BYTES or total > MAX_SEQUENCE_BYTES:
-            raise FacegenError(f"{source.name}: {name} is {size / 1e6:.0f} MB ({total / 1e6:.0f} MB so far), more "
-                               f"than any BIWI frame (~0.3 MB each, at most {MAX_VL_BYTES >> 20} MB) or sequence "
-                               f"(at most {MAX_SEQUENCE_BYTES >> 20} MB): check the archive")
+            raise FacegenError(f"{source.name}: {name} is {size / 1e6:.0f} MB ({total / 1e6:.0f} MB so far), "
+                               f"more than any BIWI frame (~0.3 MB each, at most {MAX_VL_BYTES >> 20} MB) or "
+                               f"sequence (at most {MAX_SEQUENCE_BYTES >> 20} MB): check the archive")
 
     if source.is_dir():
         for p in source.rglob("*"):
@@ -155,7 +155,8 @@ def _find_videos(raw: Path) -> dict[tuple[str, int], Path]:
 def _extract_audio(video: Path, wav: Path, sample_rate: int) -> None:
     with atomic_path(wav) as tmp:
         done = run_tool("ffmpeg", ["-nostdin", "-v", "error", "-y", "-i", video, "-vn", "-ac", "1",
-                                   "-ar", str(sample_rate), "-acodec", "pcm_s16le", "-f", "wav", tmp], text=True)
+                                   "-ar", str(sample_rate), "-acodec", "pcm_s16le", "-f", "wav", tmp],
+                        text=True)
         if done.returncode != 0 or not tmp.is_file():
             msg = (done.stderr.strip().splitlines() or ["no audio stream"])[-1]
             raise FacegenError(f"ffmpeg could not extract the audio of {video.name} ({msg})")
@@ -257,7 +258,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
         for stem, region in COMMUNITY_FILES.items():
             src = Path(regions) / f"{stem}.txt"
             if not src.is_file():
-                raise FacegenError(f"{src} is missing: pass the folder with lve.txt and fdd.txt as the regions",
+                raise FacegenError(f"{src} is missing: pass the folder with lve.txt and fdd.txt as the "
+                                   "regions",
                                    param="regions")
             idx = read_region(src)
             if idx.size and (idx.min() < 0 or idx.max() >= first.num_vertices):
@@ -278,7 +280,8 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
 
 
 def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np.ndarray, references: dict,
-                  region_idx: dict, normalisation: str, sentences_text: dict, sample_rate: int, progress: bool,
+                  region_idx: dict, normalisation: str, sentences_text: dict, sample_rate: int,
+                  progress: bool,
                   warn: Say) -> ImportReport:
     """The writing half of import_biwi (its inputs checked)."""
     first = next(iter(meshes.values()))

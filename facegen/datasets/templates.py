@@ -33,7 +33,8 @@ def _allowed_globals() -> dict[tuple[str, str], object]:
 
     def empty_reconstruct(subtype, shape, dtype):  # numpy pickles an empty array, then fills it from the file
         if tuple(np.atleast_1d(shape)) != (0,):
-            raise pickle.UnpicklingError(f"it makes an array of shape {shape} out of nothing (a memory bomb?)")
+            raise pickle.UnpicklingError(f"it makes an array of shape {shape} out of nothing (a memory "
+                                         "bomb?)")
         return multiarray._reconstruct(subtype, shape, dtype)
 
     allowed: dict[tuple[str, str], object] = {("numpy", "ndarray"): np.ndarray, ("numpy", "dtype"): np.dtype,
@@ -65,8 +66,8 @@ def read_templates_pkl(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """
     path = Path(path)
     if path.is_file() and path.stat().st_size > MAX_PKL_BYTES:
-        raise FacegenError(f"{path} is {path.stat().st_size / 1e6:.0f} MB, more than any set of face templates "
-                           "(BIWI's is ~4 MB): check the file")
+        raise FacegenError(f"{path} is {path.stat().st_size / 1e6:.0f} MB, more than any set of face "
+                           "templates (BIWI's is ~4 MB): check the file")
     try:
         # from memory, not the file: a string opcode claiming 200 MB then reads only the bytes there are
         data = _TemplateUnpickler(io.BytesIO(path.read_bytes()), encoding="latin1").load()

@@ -1,7 +1,7 @@
 """Audio2Face blend-shape JSON: the animation as ARKit's 52 shape weights per frame (arkit/solve.py's fit).
 
-The layout is NVIDIA Audio2Face's blend-shape export, which ARKit-aware importers (Blender add-ons, three.js and
-Babylon.js loaders, Unreal plug-ins) read by key:
+The layout is NVIDIA Audio2Face's blend-shape export, which ARKit-aware importers (Blender add-ons, three.js
+and Babylon.js loaders, Unreal plug-ins) read by key:
 
     {"exportFps": 25, "trackPath": "clip.wav", "numPoses": 52, "numFrames": T,
      "facsNames": ["eyeBlinkLeft", ...],            ARKit's lowerCamel names, in ARKit's order
@@ -40,8 +40,8 @@ def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True,
 
 def write_fitted(anim: Animation, path: str | os.PathLike, text: Callable[[Animation, Fit, str], str],
                  write_audio: bool, audio_source: str | os.PathLike | None) -> list[Path]:
-    """Fit the ARKit weights of `anim`, write `text(anim, fit, audio track name or "")` to `path` and the audio
-    as a WAV sidecar, atomically; return the files. Shared by the ARKit weight formats (JSON, CSV)."""
+    """Fit the ARKit weights of `anim`, write `text(anim, fit, audio track name or "")` to `path` and the
+    audio as a WAV sidecar, atomically; return the files. Shared by the ARKit weight formats (JSON, CSV)."""
     check_animation(anim)
     fit = fit_arkit(anim)
     path = Path(path)

@@ -1,4 +1,5 @@
-"""The morph basis a glTF or USD-blendshapes writer stores, chosen by rig, and what the writers derive from it.
+"""The morph basis a glTF or USD-blendshapes writer stores, chosen by rig, and what the writers derive from
+it.
 
 A rig gives named targets (offsets from the template) and a weight curve per target:
 
@@ -109,7 +110,8 @@ def stored(basis: MorphBasis) -> tuple[list[str], np.ndarray, np.ndarray]:
     return names, offsets, weights
 
 
-def normal_deltas(template: np.ndarray, faces: np.ndarray, offsets: np.ndarray, weights: np.ndarray) -> np.ndarray:
+def normal_deltas(template: np.ndarray, faces: np.ndarray, offsets: np.ndarray,
+                  weights: np.ndarray) -> np.ndarray:
     """NORMAL offsets [K, V, 3] float32 for stored targets: the normals of the template plus
     sum_k weights[t, k] * deltas[k] come as close as they can (least squares over the frames) to the true
     vertex normals of each blended frame t.
@@ -134,6 +136,7 @@ def normal_deltas(template: np.ndarray, faces: np.ndarray, offsets: np.ndarray, 
             normals[i] = vertex_normals(frame, faces)
         rhs += w.T @ (normals[: len(w)] - base).reshape(len(w), -1)
     ridge = _NORMAL_PRIOR * max(float(np.trace(gram)) / K, 1e-12)
-    deltas = np.linalg.solve(gram + ridge * np.eye(K), rhs + ridge * prior).reshape(K, V, 3).astype(np.float32)
+    deltas = np.linalg.solve(gram + ridge * np.eye(K),
+                             rhs + ridge * prior).reshape(K, V, 3).astype(np.float32)
     deltas[np.linalg.norm(deltas, axis=2) < NORMAL_EPSILON] = 0.0
     return deltas

@@ -93,7 +93,8 @@ def write(
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     sound = mp3.encode(audio, anim.sample_rate) if audio is not None else None
     bin_path = path.with_suffix(".bin")
-    gltf, blob = build(anim, basis, sound, meters_per_unit, wav_name=sidecar_path(path).name if sound else None)
+    gltf, blob = build(anim, basis, sound, meters_per_unit, wav_name=sidecar_path(path).name if sound
+                       else None)
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
         if suffix == ".glb":
             gltf.set_binary_blob(blob)
@@ -126,7 +127,8 @@ def build(
         if with_bounds:
             flat = array.reshape(count, -1)
             bounds = {"min": flat.min(0).astype(float).tolist(), "max": flat.max(0).astype(float).tolist()}
-        accessors.append(g.Accessor(bufferView=view, componentType=component, count=int(count), type=kind, **bounds))
+        accessors.append(g.Accessor(bufferView=view, componentType=component, count=int(count), type=kind,
+                                    **bounds))
         return len(accessors) - 1
 
     base = np.asarray(anim.template, dtype=np.float32)
@@ -278,7 +280,8 @@ class GltfFile:
         try:
             self.doc = g.GLTF2().load(str(self.path))
         except Exception as exc:  # pygltflib raises many types for bad files
-            raise FacegenError(f"cannot read {self.path} as glTF ({exc}): pass a valid .glb or .gltf file") from exc
+            raise FacegenError(f"cannot read {self.path} as glTF ({exc}): pass a valid .glb or .gltf "
+                               "file") from exc
         if self.doc is None:
             raise FacegenError(f"cannot read {self.path} as glTF: pass a valid .glb or .gltf file")
         self._buffers: dict[int, bytes] = {}
@@ -293,10 +296,12 @@ class GltfFile:
             else:
                 file = self.path.parent / buf.uri
                 if not file.is_file():
-                    raise FacegenError(f"{self.path} needs its buffer file {file}, which is missing: put it beside it")
+                    raise FacegenError(f"{self.path} needs its buffer file {file}, which is missing: put it "
+                                       "beside it")
                 data = file.read_bytes()
             if data is None or len(data) < (buf.byteLength or 0):
-                raise FacegenError(f"{self.path}: buffer {index} is shorter than its byteLength: the file is broken")
+                raise FacegenError(f"{self.path}: buffer {index} is shorter than its byteLength: the file is "
+                                   "broken")
             self._buffers[index] = data
         return self._buffers[index]
 
@@ -320,8 +325,10 @@ class GltfFile:
             start = acc.byteOffset or 0
             needed = start + stride * (acc.count - 1) + dtype.itemsize * width if acc.count else 0
             if needed > len(raw):
-                raise FacegenError(f"{self.path}: accessor {index} runs past its bufferView: the file is broken")
-            out = np.ndarray((acc.count, width), dtype, buffer=raw, offset=start, strides=(stride, dtype.itemsize))
+                raise FacegenError(f"{self.path}: accessor {index} runs past its bufferView: the file is "
+                                   "broken")
+            out = np.ndarray((acc.count, width), dtype, buffer=raw, offset=start, strides=(stride,
+                                                                                           dtype.itemsize))
             out = out.copy()
         if acc.sparse is not None and acc.sparse.count:
             sp = acc.sparse
@@ -352,7 +359,8 @@ class GltfFile:
 def find_animated_mesh(doc) -> tuple[int, int]:
     """(node index, mesh index) of the first node whose mesh has morph targets and animated weights."""
     animated = {
-        ch.target.node for anim in doc.animations or [] for ch in anim.channels or [] if ch.target.path == "weights"
+        ch.target.node for anim in doc.animations or [] for ch in anim.channels or []
+        if ch.target.path == "weights"
     }
     for i, node in enumerate(doc.nodes or []):
         if node.mesh is not None and i in animated:
@@ -382,7 +390,8 @@ def decode(path: str | os.PathLike) -> dict:
     node, mesh_index = find_animated_mesh(doc)
     mesh = doc.meshes[mesh_index]
     if len(mesh.primitives) != 1:
-        raise FacegenError(f"{path}: mesh {mesh_index} has {len(mesh.primitives)} primitives, facegen writes one")
+        raise FacegenError(f"{path}: mesh {mesh_index} has {len(mesh.primitives)} primitives, facegen writes "
+                           "one")
     prim = mesh.primitives[0]
     if prim.attributes.POSITION is None:
         raise FacegenError(f"{path}: the mesh has no POSITION attribute")

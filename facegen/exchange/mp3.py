@@ -81,7 +81,8 @@ def measured_delay(sample_rate: int, kbps: int) -> int:
     decoded, rate = decode(_lame(probe, sample_rate, kbps))
     delay = lag(decoded, probe)
     if rate != sample_rate or not 0 <= delay < 4 * 1152:
-        raise FacegenError(f"the MP3 encoder delay measured {delay} samples at {rate} Hz: the encoder is broken")
+        raise FacegenError(f"the MP3 encoder delay measured {delay} samples at {rate} Hz: the encoder is "
+                           "broken")
     return delay
 
 

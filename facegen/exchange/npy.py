@@ -46,9 +46,10 @@ def load_frames(path: str | os.PathLike) -> np.ndarray:
         raise FacegenError(f"file {path} does not exist: pass an existing .npy file")
     try:  # memory-mapped first: a header promising more than the file holds is refused without allocating it
         data = np.load(path, allow_pickle=False, mmap_mode="r")
-    except Exception as exc:  # a malformed header raises ValueError, SyntaxError, EOFError, ... (no pickles run)
-        raise FacegenError(f"cannot read {path} as .npy ({type(exc).__name__}: {exc}): pass a [T, 3V] float array "
-                           "file") from exc
+    # a malformed header raises ValueError, SyntaxError, EOFError, ... (no pickles run)
+    except Exception as exc:
+        raise FacegenError(f"cannot read {path} as .npy ({type(exc).__name__}: {exc}): pass a [T, 3V] float "
+                           "array file") from exc
     if data.ndim != 2 or data.shape[0] == 0 or data.shape[1] == 0 or data.shape[1] % 3:
         raise FacegenError(f"{path} has shape {list(data.shape)}, expected [T, 3V]: pass a vertex array file")
     if not np.issubdtype(data.dtype, np.floating):

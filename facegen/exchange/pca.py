@@ -167,8 +167,8 @@ def frame_basis(anim: Animation, tolerance: float | None = None, sparse: bool = 
     T = frames.shape[0]
     if T > MAX_FRAME_TARGETS:
         raise FacegenError(
-            f"one morph target per frame ('all') is for clips of at most {MAX_FRAME_TARGETS} frames, and this "
-            f"one has {T}: {suggest_k(anim, tolerance or DEFAULT_TOLERANCE)} or leave the option out",
+            f"one morph target per frame ('all') is for clips of at most {MAX_FRAME_TARGETS} frames, and "
+            f"this one has {T}: {suggest_k(anim, tolerance or DEFAULT_TOLERANCE)} or leave the option out",
             param="morph_targets"
         )
     offsets = frames - template[None]
@@ -194,7 +194,8 @@ def max_vertex_error(anim: Animation, basis: MorphBasis) -> float:
     """The largest distance between a vertex of `anim` and its reconstruction from `basis`."""
     frames, template = _frames(anim)
     rest = (template + basis.rest).reshape(-1)
-    return _max_error(frames.reshape(len(frames), -1), basis.weights, basis.targets.reshape(basis.k, -1), rest)
+    return _max_error(frames.reshape(len(frames), -1), basis.weights, basis.targets.reshape(basis.k, -1),
+                      rest)
 
 
 # ---- internals ---------------------------------------------------------------------------------------
@@ -205,9 +206,11 @@ def _frames(anim: Animation) -> tuple[np.ndarray, np.ndarray]:
     vertices = np.ascontiguousarray(anim.vertices, dtype=np.float32)
     template = np.ascontiguousarray(anim.template, dtype=np.float32)
     if vertices.ndim != 3 or vertices.shape[1:] != template.shape or vertices.shape[0] == 0:
-        raise FacegenError(f"animation vertices {list(vertices.shape)} do not match the template {list(template.shape)}")
+        raise FacegenError(f"animation vertices {list(vertices.shape)} do not match the template "
+                           f"{list(template.shape)}")
     if not (np.isfinite(vertices).all() and np.isfinite(template).all()):
-        raise FacegenError("the animation has NaN or infinite vertex coordinates: nothing sensible can be stored")
+        raise FacegenError("the animation has NaN or infinite vertex coordinates: nothing sensible can be "
+                           "stored")
     return vertices, template
 
 
@@ -314,7 +317,8 @@ def _sparsify(basis: MorphBasis, flat: np.ndarray, shift: np.ndarray, budget: fl
 
 
 def _max_error(flat: np.ndarray, weights: np.ndarray, targets: np.ndarray, rest: np.ndarray) -> float:
-    """max over frames and vertices of |flat - (rest + weights @ targets)| per vertex, in cache-sized tiles."""
+    """max over frames and vertices of |flat - (rest + weights @ targets)| per vertex, in cache-sized
+    tiles."""
     T, width = flat.shape
     weights = np.ascontiguousarray(weights, dtype=np.float32)
     rows, cols = _TILE

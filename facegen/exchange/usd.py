@@ -224,7 +224,8 @@ def _author_look(stage, mesh, template: np.ndarray) -> None:
     """UVs (primvars:st), displayColor and the skin UsdPreviewSurface material bound to the mesh."""
     from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 
-    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                 UsdGeom.Tokens.vertex)
     st.Set(Vt.Vec2fArray.FromNumpy(face_uvs(template)))
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*SKIN_COLOR)]))
     UsdGeom.Scope.Define(stage, MATERIAL_PATH.rsplit("/", 1)[0])
@@ -483,7 +484,8 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
     if len(frames) == 0:
         raise FacegenError(f"{path}: mesh {mesh.GetPath()} has no points time samples: nothing to read")
     vertices = frames if isinstance(frames, np.ndarray) else None
-    for i, frame in enumerate(() if vertices is not None else frames):  # into one array as they are read: a long clip is not held twice
+    # into one array as they are read: a long clip is not held twice
+    for i, frame in enumerate(() if vertices is not None else frames):
         if vertices is None:
             vertices = np.empty((len(frames), *frame.shape), np.float32)
         if frame.shape != vertices.shape[1:]:

@@ -57,8 +57,10 @@ def clip_frames(option: str | int, frames: int, points: bool) -> int | None:
     "auto": value clips of CLIP_FRAMES when the clip has more than CLIP_THRESHOLD frames (points mode only:
     blend shapes store a few weights per frame); "never": one file; an int N > 0: value clips of N frames
     whatever the length (points mode only)."""
-    if isinstance(option, bool) or not (option in CHOICES or isinstance(option, int | np.integer) and option > 0):
-        raise FacegenError(f"USD clips must be auto, never or a positive number of frames per clip, got {option!r}")
+    if isinstance(option, bool) or not (option in CHOICES or isinstance(option, int | np.integer)
+                                        and option > 0):
+        raise FacegenError("USD clips must be auto, never or a positive number of frames per clip, got "
+                           f"{option!r}")
     if option == "never" or (option == "auto" and (not points or frames <= CLIP_THRESHOLD)):
         return None
     if not points:
@@ -107,7 +109,8 @@ def write_clip_layers(anim: Animation, folder: Path, stem: str, mesh_path: str, 
     rest = np.ascontiguousarray(anim.template, dtype=np.float32)
     rest_layer, points, extent = _new_layer(folder / f"{stem}.rest.usdc", mesh_path, anim.fps)
     rest_layer.GetAttributeAtPath(points).default = Vt.Vec3fArray.FromNumpy(rest)
-    rest_layer.GetAttributeAtPath(extent).default = Vt.Vec3fArray.FromNumpy(np.stack([rest.min(0), rest.max(0)]))
+    rest_layer.GetAttributeAtPath(extent).default = Vt.Vec3fArray.FromNumpy(np.stack([rest.min(0),
+                                                                                      rest.max(0)]))
     _save(rest_layer, folder / f"{stem}.rest.usdc")
 
     names = clip_names(stem, anim.num_frames, per_clip)

@@ -64,8 +64,10 @@ def layer_info(basis: MorphBasis, count: int) -> dict:
     return info
 
 
-def frame_extents(template: np.ndarray, offsets: np.ndarray, weights: np.ndarray, block: int = 64) -> np.ndarray:
-    """[T, 2, 3] float32: the bounding box (min, max) of each blended frame template + weights[t] @ offsets."""
+def frame_extents(template: np.ndarray, offsets: np.ndarray, weights: np.ndarray,
+                  block: int = 64) -> np.ndarray:
+    """[T, 2, 3] float32: the bounding box (min, max) of each blended frame template + weights[t] @
+    offsets."""
     template = np.asarray(template, np.float32)
     flat = np.asarray(offsets, np.float32).reshape(len(offsets), -1)
     out = np.empty((len(weights), 2, 3), np.float32)

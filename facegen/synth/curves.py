@@ -295,6 +295,7 @@ def motion_curves(phones: Sequence, words: Sequence, num_frames: int, fps: float
     """All rig channels [num_frames, len(CHANNELS)]: visemes, expressions and blinks, in CHANNELS order
     (`alphabet` and `loudness`: see viseme_curves)."""
     rng = rng if rng is not None else np.random.default_rng(0)
-    return np.concatenate([viseme_curves(phones, num_frames, fps, style, alphabet=alphabet, loudness=loudness),
+    return np.concatenate([viseme_curves(phones, num_frames, fps, style, alphabet=alphabet,
+                                         loudness=loudness),
                            expression_curves(words, num_frames, fps, lexicon, style),
                            blink_curves(num_frames, fps, rng, style)], 1)

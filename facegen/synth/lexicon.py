@@ -36,7 +36,8 @@ def _entries(cls: str, role: str, words: str) -> dict[str, Emotion]:
 
 # experiencer: an adjective for how a person feels ("my brother was furious");
 # stimulus: an adjective for what something is like ("the film was terrifying");
-# other: nouns, verbs, adverbs, interjections and adjectives that fit no template (for hand-written sentences).
+# other: nouns, verbs, adverbs, interjections and adjectives that fit no template (for hand-written
+# sentences).
 TRAIN_LEXICON: dict[str, Emotion] = {
     # ------------------------------------------------------------------------------------------ surprise
     **_entries("surprise", "experiencer", """
@@ -135,13 +136,14 @@ HELD_OUT_LEXICON: dict[str, Emotion] = {
     **_entries("surprise", "experiencer", """
         flabbergasted:1.0 dumbfounded:0.9 bewildered:0.7 thunderstruck:1.0 nonplussed:0.5 incredulous:0.7
         mystified:0.5 staggered:0.8 perplexed:0.5 astounded:0.9"""),
-    **_entries("surprise", "stimulus", "staggering:0.8 stupefying:0.9 unforeseen:0.6 perplexing:0.5 astounding:0.9 "
-               "peculiar:0.4 bewildering:0.7"),
+    **_entries("surprise", "stimulus", "staggering:0.8 stupefying:0.9 unforeseen:0.6 perplexing:0.5 "
+               "astounding:0.9 peculiar:0.4 bewildering:0.7"),
     **_entries("anger", "experiencer", """
         seething:1.0 wrathful:0.9 irate:0.9 indignant:0.7 apoplectic:1.0 miffed:0.4 disgruntled:0.5
         vindictive:0.8"""),
     **_entries("anger", "other", "loathe:0.9"),
-    **_entries("anger", "stimulus", "odious:0.8 loathsome:0.9 detestable:0.8 abhorrent:0.9 vexing:0.5 galling:0.6"),
+    **_entries("anger", "stimulus", "odious:0.8 loathsome:0.9 detestable:0.8 abhorrent:0.9 vexing:0.5 "
+                                    "galling:0.6"),
     **_entries("sadness", "experiencer", """
         forlorn:0.8 melancholy:0.7 woebegone:0.8 disconsolate:0.9 doleful:0.6 rueful:0.4 dispirited:0.6
         morose:0.7"""),

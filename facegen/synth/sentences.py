@@ -200,14 +200,17 @@ _TEMPLATES = {
           "{Time}, {p} looked {E} as {pron} walked out of {place}.",
           "When {event}, {p} {be} {E} for the rest of the {part}.",
           "{P} said that {pron} felt {E} when {event}.", "I could see that {p} {be} {E} the moment {event}.",
-          "{P} {be} too {E} to speak when {event}.", "{P} {be} {E} after {show} and talked about it {duration}."),
+          "{P} {be} too {E} to speak when {event}.",
+          "{P} {be} {E} after {show} and talked about it {duration}."),
     "S": ("From {vantage}, {sight} looked {S} {time}.", "We stopped the car because {sight} looked so {S}.",
           "{P} took a photo because {sight} looked so {S}.", "{Sight} looked {S} when we walked past {time}.",
-          "{Show} was {S}, and {p} talked about it {duration}.", "Everyone at {place} agreed that {show} was {S}.",
+          "{Show} was {S}, and {p} talked about it {duration}.",
+          "Everyone at {place} agreed that {show} was {S}.",
           "{P} told us that {show} was really {S}.", "I did not expect {show} to be so {S}, but it was.",
           "To be honest, {show} was {S} from start to finish."),
     "EE": ("{P} {be} {E} when {event}, but {p2} {be2} {E2}.", "{P} {be} {E} and {E2} when {event}."),
-    "SE": ("{Show} was {S}, and {p2} {be2} {E2} afterwards.", "{Sight} looked {S}, and {p2} {be2} {E2} at first."),
+    "SE": ("{Show} was {S}, and {p2} {be2} {E2} afterwards.",
+           "{Sight} looked {S}, and {p2} {be2} {E2} at first."),
     "N": ("{P} went to {place} {time} to {errand}.", "Could you ask {p} to {errand} before {deadline}?",
           "We met {p} at {place} {time} and walked home together.",
           "{P} forgot to {errand} and had to go back to {place}.", "Please remind {p} to {errand} {later}.",
@@ -255,7 +258,8 @@ class _Generator:
         fill["event"] = self.pick([e for e, classes in self.events if cls is None or cls in classes])
         fill["sight"] = self.pick([s for s, classes in self.sights if cls is None or cls in classes])
         fill.update(P=_cap(p), p=p, pron=pron, be="were" if pron == "they" else "was", p2=p2,
-                    be2="were" if pron2 == "they" else "was", Time=_cap(fill["time"]), Show=_cap(fill["show"]),
+                    be2="were" if pron2 == "they" else "was", Time=_cap(fill["time"]),
+                    Show=_cap(fill["show"]),
                     Sight=_cap(fill["sight"]))
         return fill
 
@@ -265,7 +269,8 @@ class _Generator:
         templates = _TEMPLATES[kind]
         if "S" in words and words["S"] not in _SCENIC and words["S"] not in _NEUTRAL["stimulus"]:
             templates = tuple(t for t in templates if "{sight}" not in t.lower())
-        if "E" in words and words["E"] not in TRAIN_LEXICON:  # neutral or held-out (then its twin): "calm to hear"
+        # neutral or held-out (then its twin): "calm to hear"
+        if "E" in words and words["E"] not in TRAIN_LEXICON:
             templates = tuple(t for t in templates if "to hear" not in t)
         while True:
             template = self.pick(templates)
@@ -298,7 +303,8 @@ def generated_splits(n: int = GENERATED) -> dict[str, range]:
     train, val = known * 8 // 10, known // 10
     edges = [FIRST_GENERATED, FIRST_GENERATED + train, FIRST_GENERATED + train + val,
              FIRST_GENERATED + known, FIRST_GENERATED + n]
-    return {name: range(a, b) for name, a, b in zip(("train", "val", "test", "test-unseen"), edges, edges[1:])}
+    return {name: range(a, b) for name, a, b in zip(("train", "val", "test", "test-unseen"), edges,
+                                                    edges[1:])}
 
 
 def _choice(rng: random.Random, count: int, cls: str, pools) -> tuple[str, str | None, dict[str, str]]:
@@ -306,7 +312,8 @@ def _choice(rng: random.Random, count: int, cls: str, pools) -> tuple[str, str |
     roles = {"E": "experiencer", "S": "stimulus"}
     kind = rng.choice("ES")
     if count == 0:
-        return ("N", None, {}) if rng.random() < 0.5 else (kind, None, {kind: rng.choice(_NEUTRAL[roles[kind]])})
+        return ("N", None, {}) if rng.random() < 0.5 else (kind, None,
+                                                           {kind: rng.choice(_NEUTRAL[roles[kind]])})
     if count == 1:
         return kind, cls, {kind: rng.choice(pools[cls, roles[kind]])}
     kind = rng.choice(("EE", "SE"))

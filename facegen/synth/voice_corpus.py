@@ -212,7 +212,8 @@ def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, worke
               "limit": limit, "fps": FPS, "sample_rate": RATE}
     out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / MANIFEST
-    manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {"params": params, "done": {}}
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {"params": params,
+                                                                                      "done": {}}
     if manifest["params"] != params:
         raise FacegenError(f"{out} holds a voices corpus made with other parameters ({manifest['params']}): "
                            "choose another folder")
@@ -220,8 +221,8 @@ def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, worke
     need = estimate_bytes(todo)
     free = shutil.disk_usage(out).free
     if need > free:
-        raise FacegenError(f"the corpus needs about {need / 1e9:.1f} GB and {out} has {free / 1e9:.1f} GB free: "
-                           "free space or pass fewer sentences")
+        raise FacegenError(f"the corpus needs about {need / 1e9:.1f} GB and {out} has {free / 1e9:.1f} GB "
+                           "free: free space or pass fewer sentences")
     if not (out / "BIWI.ply").is_file():
         _write_root(out, takes)
     say(f"{len(todo)} of {len(takes)} sequences to make ({need / 1e9:.2f} GB), {workers} workers")

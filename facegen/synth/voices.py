@@ -177,7 +177,8 @@ class Flite(Engine):
         lexical = [exe, "-voice", "kal16" if "kal16" in _flite_voice_list(exe) else voice.id]
         said: list[str] = []
         for w in _run([*lexical, "-pw", "-t", text, "none"], what, timeout).split():
-            if w.startswith("'") and said:  # a clitic ('s, 'll) said alone is spelled out: keep it on its word
+            # a clitic ('s, 'll) said alone is spelled out: keep it on its word
+            if w.startswith("'") and said:
                 said[-1] += w
             else:
                 said.append(w)
@@ -272,10 +273,12 @@ class Espeak(Engine):
     # (language+variant, gender, pitch 0-100, words per minute)
     _SETTINGS: ClassVar[dict[str, tuple[str, int, int]]] = {
         "en-us+f1": ("female", 55, 160), "en+f2": ("female", 50, 150), "en-us+f3": ("female", 45, 165),
-        "en-gb-x-rp+f4": ("female", 60, 150), "en-029+f5": ("female", 48, 155), "en+belinda": ("female", 40, 165),
+        "en-gb-x-rp+f4": ("female", 60, 150), "en-029+f5": ("female", 48, 155), "en+belinda": ("female", 40,
+                                                                                               165),
         "en-us+steph": ("female", 52, 145), "en-gb-scotland+linda": ("female", 58, 160),
         "en-us+m1": ("male", 45, 160), "en+m2": ("male", 55, 152), "en-us-nyc+m3": ("male", 50, 168),
-        "en-gb-x-rp+m4": ("male", 40, 146), "en-us+m6": ("male", 60, 158), "en-gb-scotland+m7": ("male", 50, 154),
+        "en-gb-x-rp+m4": ("male", 40, 146), "en-us+m6": ("male", 60, 158), "en-gb-scotland+m7": ("male", 50,
+                                                                                                 154),
         "en-us+klatt": ("male", 50, 160), "en+whisper": ("female", 50, 150),
     }
     voices = tuple(Voice("espeak", k, g, "espeakng-loader (PyPI)", f"espeak-ng {k}, pitch {p}, {r} wpm")

@@ -1,5 +1,5 @@
-"""Checks on ARKit weight files (Audio2Face JSON, exchange/arkit_json.py; Live Link Face CSV, exchange/arkit_csv.py),
-added to a Report, one finding per problem:
+"""Checks on ARKit weight files (Audio2Face JSON, exchange/arkit_json.py; Live Link Face CSV,
+exchange/arkit_csv.py), added to a Report, one finding per problem:
 
   file             the file parses: a JSON object / a CSV with a header row and frames
   keys             (JSON) exportFps, numPoses, numFrames, facsNames and weightMat are there
@@ -40,7 +40,8 @@ RANGE_SLACK = 1e-6  # weights may exceed [0, 1] by float rounding only
 
 
 def check(report: Report, path: Path, expected: Expected) -> None:
-    """Add the ARKit weight-file checks for `path` (.json or .csv) to `report`; never raises for a bad file."""
+    """Add the ARKit weight-file checks for `path` (.json or .csv) to `report`; never raises for a bad
+    file."""
     if path.suffix.lower() == ".csv":
         frames, fps, tracks = _check_csv(report, path, expected)
     else:
@@ -85,7 +86,8 @@ def _check_json(report: Report, path: Path, expected: Expected) -> tuple[int | N
     if "exportFps" in doc:
         matches = not fps_ok or expected.fps is None or abs(fps - expected.fps) < 1e-6
         report.add("fps", fps_ok and matches, f"exportFps {fps!r}" + (
-            "" if fps_ok else ": must be a finite number > 0") + ("" if matches else f", expected {expected.fps:g}"))
+            "" if fps_ok else ": must be a finite number > 0") + ("" if matches
+                                                                  else f", expected {expected.fps:g}"))
     frames = doc.get("numFrames")
     if rows is not None and "numFrames" in doc:
         ok = _is_number(frames) and frames == len(rows) > 0
@@ -94,7 +96,8 @@ def _check_json(report: Report, path: Path, expected: Expected) -> tuple[int | N
     if rows is not None:
         _check_weights(report, [v for r in rows for v in r], [])
     _report_fit(report, doc.get("facegen"))
-    tracks = [t for t in (doc.get("trackPath"), (doc.get("facegen") or {}).get("audio")) if isinstance(t, str) and t]
+    tracks = [t for t in (doc.get("trackPath"), (doc.get("facegen") or {}).get("audio")) if isinstance(t, str)
+              and t]
     return (len(rows) if rows is not None else None), (float(fps) if fps_ok else DEFAULT_FPS), tracks
 
 
@@ -114,7 +117,8 @@ def _check_csv(report: Report, path: Path, expected: Expected) -> tuple[int | No
     shape_columns = LIVE_LINK_COLUMNS[2 : len(LIVE_LINK_COLUMNS) - len(LIVE_LINK_ROTATIONS)]
     fixed = [c for c in ("Timecode", "BlendShapeCount") if c not in header]
     rotations = [c for c in header if c in LIVE_LINK_ROTATIONS]
-    _check_names(report, [c for c in header if c not in ("Timecode", "BlendShapeCount") and c not in rotations],
+    _check_names(report, [c for c in header if c not in ("Timecode", "BlendShapeCount")
+                          and c not in rotations],
                  shape_columns, "columns", fixed)
     bad = next((i for i, r in enumerate(rows) if len(r) != len(header)), None)
     report.add("row length", bad is None, f"every row has {len(header)} values" if bad is None
@@ -123,10 +127,12 @@ def _check_csv(report: Report, path: Path, expected: Expected) -> tuple[int | No
     shapes = [i for c, i in column.items() if c not in ("Timecode", "BlendShapeCount") and c not in rotations]
     if "BlendShapeCount" in column:
         count = len(shapes) + len(rotations)
-        wrong = next((i for i, r in enumerate(rows) if _cell(r, column["BlendShapeCount"]) != str(count)), None)
+        wrong = next((i for i, r in enumerate(rows) if _cell(r, column["BlendShapeCount"]) != str(count)),
+                     None)
         report.add("BlendShapeCount", wrong is None, f"{count} in every row (shape and rotation columns)"
-                   if wrong is None else f"row {wrong + 1} says {_cell(rows[wrong], column['BlendShapeCount'])!r}, "
-                                         f"the file has {count} shape and rotation columns")
+                   if wrong is None else f"row {wrong + 1} says "
+                                         f"{_cell(rows[wrong], column['BlendShapeCount'])!r}, the file has "
+                                         f"{count} shape and rotation columns")
     fps = expected.fps
     if "Timecode" in column:
         fps = _check_timecodes(report, [_cell(r, column["Timecode"]) for r in rows], expected.fps)
@@ -141,7 +147,8 @@ def _check_names(report: Report, names: list[str], canonical: tuple[str, ...], w
     missing = [n for n in canonical if n not in names] + list(missing_fixed)
     unknown = [n for n in names if n not in canonical]
     twice = sorted({n for n in names if names.count(n) > 1})
-    problems = [f"missing {', '.join(missing)}" if missing else "", f"unknown {', '.join(unknown)}" if unknown else "",
+    problems = [f"missing {', '.join(missing)}" if missing else "", f"unknown {', '.join(unknown)}" if unknown
+                else "",
                 f"twice: {', '.join(twice)}" if twice else ""]
     ok = not any(problems)
     report.add("names", ok, f"{len(names)} {what}: the {len(canonical)} ARKit shapes" if ok
@@ -149,7 +156,8 @@ def _check_names(report: Report, names: list[str], canonical: tuple[str, ...], w
     if ok:
         same = tuple(names) == canonical
         report.add("name order", same, "in ARKit's order" if same else "the ARKit shapes in another order "
-                                                                       "(importers that read by position differ)",
+                                                                       "(importers that read by position "
+                                                                       "differ)",
                    severity="warning")
 
 
@@ -178,8 +186,10 @@ def _check_weights(report: Report, weights: list, rotations: list) -> None:
     turns = np.array([_number(v) for v in rotations], np.float64)
     bad, bad_turns = int((~np.isfinite(values)).sum()), int((~np.isfinite(turns)).sum())
     report.add("finite", not bad and not bad_turns, f"{len(values)} weights" + (
-        f" and {len(turns)} rotations" if len(turns) else "") + " are finite numbers" if not bad and not bad_turns
-        else f"{bad} of {len(values)} weights" + (f", {bad_turns} of {len(turns)} rotations" if bad_turns else "")
+        f" and {len(turns)} rotations" if len(turns) else "") + " are finite numbers" if not bad
+               and not bad_turns
+        else f"{bad} of {len(values)} weights" + (f", {bad_turns} of {len(turns)} rotations" if bad_turns
+                                                  else "")
         + " are not finite numbers")
     finite = values[np.isfinite(values)]
     outside = int(((finite < -RANGE_SLACK) | (finite > 1 + RANGE_SLACK)).sum())
@@ -193,7 +203,8 @@ def _report_fit(report: Report, info) -> None:
         return
     lip, face = info.get("lip_error_mm"), info.get("face_error_mm")
     if not (_is_number(lip) and _is_number(face)):
-        report.add("fit", False, "the facegen key has no lip_error_mm / face_error_mm numbers", severity="warning")
+        report.add("fit", False, "the facegen key has no lip_error_mm / face_error_mm numbers",
+                   severity="warning")
         return
     report.add("fit", lip <= LIP_ERROR_TARGET_MM,
                f"52-shape fit error (mean per vertex): lips {lip:.3f} mm, whole face {face:.3f} mm"

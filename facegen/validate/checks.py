@@ -65,15 +65,16 @@ def check_values(
     if len(frames) == 0:
         report.add("finite", False, "no frames with the expected vertex count to check")
         return
-    scan = ValueScan(template.vertices if template is not None else own_rest if own_rest is not None else frames[0])
+    scan = ValueScan(template.vertices if template is not None else own_rest if own_rest is not None
+                     else frames[0])
     for i, f in enumerate(frames):
         scan.add(i, f)
     scan.report(report, max_displacement)
 
 
 class ValueScan:
-    """finite + displacement measured one frame at a time (`add`, each frame read once: a USD frame is read from
-    the file), then reported (`report`); the frames have the vertex count of `rest`."""
+    """finite + displacement measured one frame at a time (`add`, each frame read once: a USD frame is read
+    from the file), then reported (`report`); the frames have the vertex count of `rest`."""
 
     def __init__(self, rest: np.ndarray) -> None:
         self.rest = np.asarray(rest, dtype=np.float32)
@@ -151,6 +152,7 @@ def check_duration(
     report.add(
         "audio duration",
         ok,
-        f"{frames} frames at {fps:g} fps = {frames / fps:.3f} s; audio {seconds:.3f} s = {expected:.1f} frames"
+        f"{frames} frames at {fps:g} fps = {frames / fps:.3f} s; audio {seconds:.3f} s = {expected:.1f} "
+        "frames"
         + ("" if ok else " (more than one frame apart)"),
     )

@@ -72,9 +72,11 @@ def run_gltf_validator(path: str | os.PathLike, *, script: str | os.PathLike | N
     except ValueError:
         report = None
     if done.returncode == 3:
-        return None, (f"the npm package gltf-validator@{validator_version()} is not installed: {INSTALL_HINT}")
+        return None, (f"the npm package gltf-validator@{validator_version()} is not installed: "
+                      f"{INSTALL_HINT}")
     if report is None or "error" in report or done.returncode != 0:
-        why = report.get("error") if isinstance(report, dict) else (done.stderr.strip().splitlines() or ["?"])[-1]
+        why = report.get("error") if isinstance(report, dict) else (done.stderr.strip().splitlines()
+                                                                    or ["?"])[-1]
         return None, f"the glTF-Validator failed: {why}"
     return report, ""
 
@@ -89,7 +91,8 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     info = decoded["info"]
     K, T = len(decoded["targets"]), len(decoded["times"])
     report.add("file", True, f"glTF {'binary' if path.suffix.lower() == '.glb' else 'JSON'}: one mesh, "
-               f"{K} morph targets, {T} keys (written by {info.get('version') and 'facegen ' + info['version'] or '?'})")
+               f"{K} morph targets, {T} keys (written by "
+               f"{info.get('version') and 'facegen ' + info['version'] or '?'})")
     _khronos(report, path)
     check_rig(report, decoded["names"], info.get("lipErrorMm"), info.get("faceErrorMm"))
 
@@ -121,7 +124,8 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     embedded = None
     if data is None:
         report.add("embedded audio", not require_audio or audio is not None,
-                   "no KHR_audio_emitter audio/mpeg in the file" + ("" if require_audio else " (not required)"))
+                   "no KHR_audio_emitter audio/mpeg in the file" + ("" if require_audio
+                                                                    else " (not required)"))
     else:
         try:
             embedded = mp3.decode(data)
@@ -158,7 +162,8 @@ def _khronos(report: Report, path: Path) -> None:
                + (f" ({', '.join(infos)})" if infos else ""))
     for m in messages:
         if m.get("severity") in (0, 1):
-            report.add(f"gltf:{m.get('code')}", False, f"{m.get('pointer', '')}: {m.get('message', '')}".strip(": "),
+            report.add(f"gltf:{m.get('code')}", False, f"{m.get('pointer', '')}: "
+                                                       f"{m.get('message', '')}".strip(": "),
                        "error" if m["severity"] == 0 else "warning")
 
 
@@ -213,15 +218,17 @@ def _check_reconstruction(report: Report, frames: np.ndarray, info: dict, templa
         return
     size = float(source.size)
     error = float(np.sqrt(((frames - source.vertices) ** 2).sum(axis=2)).max()) / size
-    limit = tolerance if isinstance(tolerance, int | float) else claimed if isinstance(claimed, int | float) else 0.0
+    limit = tolerance if isinstance(tolerance, int | float) else claimed if isinstance(claimed,
+                                                                                       int | float) else 0.0
     slack = 1e-6  # float32 rounding of the stored arrays
     ok = error <= limit + slack and (not isinstance(claimed, int | float) or error <= claimed + slack)
-    report.add("reconstruction", ok, f"largest vertex error {error:.3g} of the face size against the reference "
-               f"(stated {claimed if claimed is None else f'{claimed:.3g}'}, tolerance "
+    report.add("reconstruction", ok, f"largest vertex error {error:.3g} of the face size against the "
+               f"reference (stated {claimed if claimed is None else f'{claimed:.3g}'}, tolerance "
                f"{tolerance if tolerance is None else f'{tolerance:g}'})")
 
 
-def _check_sync(report: Report, embedded: tuple[np.ndarray, int], audio: tuple[np.ndarray, int], rate: float) -> None:
+def _check_sync(report: Report, embedded: tuple[np.ndarray, int], audio: tuple[np.ndarray, int],
+                rate: float) -> None:
     samples, sample_rate = embedded
     wav, wav_rate = audio
     if wav_rate != sample_rate:
@@ -237,4 +244,5 @@ def _check_sync(report: Report, embedded: tuple[np.ndarray, int], audio: tuple[n
     lag = mp3.lag(samples, wav)
     seconds = lag / sample_rate
     report.add("audio sync", abs(seconds) <= 1.0 / rate,
-               f"the embedded MP3 is {seconds * 1000:+.1f} ms from the WAV sidecar (one frame: {1000 / rate:.0f} ms)")
+               f"the embedded MP3 is {seconds * 1000:+.1f} ms from the WAV sidecar (one frame: "
+               f"{1000 / rate:.0f} ms)")

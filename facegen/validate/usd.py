@@ -233,9 +233,10 @@ def _check_clips(report: Report, mesh) -> None:
         assets = list(clip_set.get("assetPaths", []))
         active = [tuple(a) for a in clip_set.get("active", [])]
         starts = [a[0] for a in active]
-        if [int(a[1]) for a in active] != list(range(len(assets))) or starts != sorted(starts) or starts[:1] != [0]:
-            problems.append(f"clip set {name!r}: active {active[:4]} does not play its {len(assets)} clips in order "
-                            "from time 0")
+        if [int(a[1])
+            for a in active] != list(range(len(assets))) or starts != sorted(starts) or starts[:1] != [0]:
+            problems.append(f"clip set {name!r}: active {active[:4]} does not play its {len(assets)} clips "
+                            "in order from time 0")
         manifest = clip_set.get("manifestAssetPath")
         identity = all(a == b for a, b in clip_set.get("times", []))  # clip time = stage time (facegen's)
         for k, asset in enumerate(assets):
@@ -243,7 +244,8 @@ def _check_clips(report: Report, mesh) -> None:
             if layer is None:
                 problems.append(f"clip layer {asset.path} does not resolve or open")
                 continue
-            spec = layer.GetAttributeAtPath(Sdf.Path(str(clip_set.get("primPath", mesh.GetPath()))).AppendProperty(
+            spec = layer.GetAttributeAtPath(Sdf.Path(str(clip_set.get("primPath",
+                                                                      mesh.GetPath()))).AppendProperty(
                 "points"))
             times = list(layer.ListTimeSamplesForPath(spec.path)) if spec else []
             end = starts[k + 1] if k + 1 < len(starts) else float("inf")
@@ -253,15 +255,16 @@ def _check_clips(report: Report, mesh) -> None:
             del layer
         if manifest is not None and manifest.path and not manifest.resolvedPath:
             problems.append(f"clip manifest {manifest.path} does not resolve")
-        described.append(f"{name}: {len(assets)} clip layers" + (f" ({assets[0].path} ...)" if assets else ""))
+        described.append(f"{name}: {len(assets)} clip layers" + (f" ({assets[0].path} ...)" if assets
+                                                                 else ""))
     report.add("clips", not problems, "; ".join(problems[:3]) or "; ".join(described) + ", all resolve")
 
 
 def _scan_points(mesh, frames: usd_format.PointsFrames, rest: np.ndarray | None,
                  count: int | None) -> tuple[list[int], ValueScan | None, str | None]:
-    """Each `points` sample read once: the vertex counts, finite + displacement against `rest` of the frames with
-    `count` vertices (a ValueScan, None without a rest pose), and the first problem of the extent samples (an
-    extent sample per frame bounding its points), or None."""
+    """Each `points` sample read once: the vertex counts, finite + displacement against `rest` of the frames
+    with `count` vertices (a ValueScan, None without a rest pose), and the first problem of the extent samples
+    (an extent sample per frame bounding its points), or None."""
     from pxr import UsdGeom
 
     extent = mesh.GetExtentAttr()
@@ -279,7 +282,8 @@ def _scan_points(mesh, frames: usd_format.PointsFrames, rest: np.ndarray | None,
         if problem is None:
             want = np.asarray(UsdGeom.PointBased.ComputeExtent(value), dtype=np.float64)
             have = np.asarray(extent.Get(t), dtype=np.float64)
-            # np.allclose's test (equal infinities are close, NaN is not) without its overhead, 2 x 3 values a frame
+            # np.allclose's test (equal infinities are close, NaN is not) without its overhead, 2 x 3 values a
+            # frame
             with np.errstate(invalid="ignore"):
                 close = have.shape == want.shape == (2, 3) and bool(
                     ((have == want) | (np.abs(have - want) <= 1e-6 + 1e-5 * np.abs(want))).all())
@@ -293,8 +297,8 @@ def _scan_points(mesh, frames: usd_format.PointsFrames, rest: np.ndarray | None,
 def _check_time_samples(report: Report, stage, mesh, times: list[float], what: str = "points",
                         frames=(), extent_problem: str | None = None) -> None:
     """Samples at 0..T-1 and the stage's range; for `points`, an extent sample bounding each frame (its first
-    problem found by _scan_points: `extent_problem`); for blend shapes, the extent at each time (sampled or not)
-    bounding the blended `frames`."""
+    problem found by _scan_points: `extent_problem`); for blend shapes, the extent at each time (sampled or
+    not) bounding the blended `frames`."""
     count = len(times)
     problems = []
     if times != [float(i) for i in range(count)]:
@@ -302,7 +306,8 @@ def _check_time_samples(report: Report, stage, mesh, times: list[float], what: s
         problems.append(f"{what} sampled at {shown} instead of 0, 1, ..., {count - 1}")
     if count and (stage.GetStartTimeCode() != 0 or stage.GetEndTimeCode() != count - 1):
         problems.append(
-            f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected 0..{count - 1}"
+            f"stage time range {stage.GetStartTimeCode():g}..{stage.GetEndTimeCode():g}, expected "
+            f"0..{count - 1}"
         )
     extent = mesh.GetExtentAttr()
     if what != "points":  # blend shapes deform the rest pose: the extent must hold every blended frame
