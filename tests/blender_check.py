@@ -87,7 +87,8 @@ def check(path: Path, expect: dict) -> dict:
         cache = [m for m in obj.modifiers if m.type == "MESH_SEQUENCE_CACHE"]
         if action is not None:  # glTF: shape keys driven by an action
             span = [float(action.frame_range[0]), float(action.frame_range[1])]
-            add("animation", span == [0.0, float(T - 1)], {"kind": "shape keys", "keys": len(keys.key_blocks) - 1,
+            add("animation", span == [0.0, float(T - 1)], {"kind": "shape keys",
+                                                           "keys": len(keys.key_blocks) - 1,
                                                             "action_frames": span})
         else:  # USD: a mesh-sequence cache (its span is shown by the positions at the first/last frame)
             add("animation", bool(cache), {"kind": "mesh sequence cache" if cache else "none"})
@@ -207,7 +208,8 @@ def main() -> int:
     parser.add_argument("--addon", help="the add-on zip: install it, apply through its operator")
     args = parser.parse_args()
     if args.arkit:
-        result = check_arkit(json.loads(Path(args.arkit).read_text()), Path(args.addon) if args.addon else None)
+        result = check_arkit(json.loads(Path(args.arkit).read_text()), Path(args.addon) if args.addon
+                             else None)
         print("blender_check: " + json.dumps(result), flush=True)
         return 0
     result = check(Path(args.file).resolve(), json.loads(Path(args.expect_json).read_text()))

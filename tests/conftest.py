@@ -22,7 +22,8 @@ def biwi_template():
     from facegen.face.mesh import read_mesh, read_region
 
     mesh = read_mesh(BIWI_DIR / "BIWI.ply")
-    mesh.regions = {"lips": read_region(BIWI_DIR / "lve.txt"), "upper_face": read_region(BIWI_DIR / "fdd.txt")}
+    mesh.regions = {"lips": read_region(BIWI_DIR / "lve.txt"),
+                    "upper_face": read_region(BIWI_DIR / "fdd.txt")}
     return mesh
 
 

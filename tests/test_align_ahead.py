@@ -1,7 +1,7 @@
-"""Alignment started ahead (facegen/align_ahead.py): a new `facegen animate` process aligns the transcript in a
-forked process while it imports torch. The words, phones and vertices must be those of the in-process path, a
-wrong transcript still one line and exit 2 with nothing written, and no aligner process may outlive the command.
-The speed-up is measured by benchmarks/bench_start.py, not here."""
+"""Alignment started ahead (facegen/align_ahead.py): a new `facegen animate` process aligns the transcript in
+a forked process while it imports torch. The words, phones and vertices must be those of the in-process path,
+a wrong transcript still one line and exit 2 with nothing written, and no aligner process may outlive the
+command. The speed-up is measured by benchmarks/bench_start.py, not here."""
 
 from __future__ import annotations
 
@@ -65,11 +65,13 @@ def test_a_new_process_aligns_ahead_and_gets_what_the_library_gets(tmp_path):
 @pytest.mark.skipif(sys.platform != "linux", reason="the aligner is forked on Linux")
 def test_a_wrong_transcript_is_still_one_line_exit_2_and_nothing_written(tmp_path):
     out = tmp_path / "out.usdc"
-    proc = run_facegen("animate", WAV, "--text", "The cat sat on the mat and purred all afternoon long.", "-o", out,
+    proc = run_facegen("animate", WAV, "--text", "The cat sat on the mat and purred all afternoon long.",
+                       "-o", out,
                    FACEGEN_PROFILE="1")
     said = [x for x in proc.stderr.splitlines() if not x.startswith("{")]
     assert proc.returncode == 2, proc.stderr
-    assert said == [said[0]] and said[0].startswith("facegen: error: the transcript does not match the speech")
+    assert said == [said[0]] and said[0].startswith("facegen: error: the transcript does not match the "
+                                                    "speech")
     assert "Traceback" not in proc.stderr
     assert list(tmp_path.iterdir()) == []
     assert profile_of(proc)["alignment"] >= 0  # the error came back from the forked aligner
@@ -168,4 +170,5 @@ def test_while_the_alignment_runs_the_word_vectors_are_computed_and_meanwhile_ca
                             meanwhile=lambda: called.append(import_writer("out.usdc")))
     assert called == [None] and "pxr.UsdGeom" in sys.modules and "pxr.UsdMedia" in sys.modules
     assert clip.words == later.words
-    assert np.array_equal(clip.text_features, later.text_features) and np.array_equal(clip.phones, later.phones)
+    assert np.array_equal(clip.text_features, later.text_features) and np.array_equal(clip.phones,
+                                                                                      later.phones)

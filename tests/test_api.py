@@ -15,11 +15,12 @@ EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "excellent_room.wav
 
 
 def test_import_is_lazy():
-    code = ("import sys, facegen; heavy = [m for m in ('torch', 'pxr', 'transformers', 'numpy') if m in sys.modules];"
-            "print(','.join(heavy))")
+    code = ("import sys, facegen; heavy = [m for m in ('torch', 'pxr', 'transformers', 'numpy') if m in "
+            "sys.modules];print(','.join(heavy))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == ""
-    assert set(facegen.__all__) >= {"animate", "load_bundle", "Animation", "read_animation", "write_animation"}
+    assert set(facegen.__all__) >= {"animate", "load_bundle", "Animation", "read_animation",
+                                    "write_animation"}
 
 
 def test_animate_write_read_round_trip(tmp_path, grid_mesh):

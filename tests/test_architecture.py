@@ -133,9 +133,9 @@ def layer_of(module: str, table: list[tuple[str, list[str]]]) -> int | None:
     for index, (_, patterns) in enumerate(table):
         for pattern in patterns:
             name = "facegen." + pattern.removesuffix("/").removesuffix(".py").replace("/", ".")
-            if module == name or (pattern.endswith("/") and module.startswith(name + ".")):
-                if best is None or len(name) > best[0]:
-                    best = (len(name), index)
+            covers = module == name or (pattern.endswith("/") and module.startswith(name + "."))
+            if covers and (best is None or len(name) > best[0]):
+                best = (len(name), index)
     return None if best is None else best[1]
 
 

@@ -13,7 +13,8 @@ SR = 16000
 
 
 def _speechlike(seconds: float = 2.0, f0: float = 140.0, seed: int = 0) -> np.ndarray:
-    """Harmonics of f0 under a falling spectral tilt, gated into 'syllables' with silences between and around."""
+    """Harmonics of f0 under a falling spectral tilt, gated into 'syllables' with silences between and
+    around."""
     t = np.arange(int(seconds * SR)) / SR
     voiced = sum(np.sin(2 * np.pi * k * f0 * t + k) / k for k in range(1, 25))
     gate = ((t > 0.3) & (t < seconds - 0.3)) * (np.sin(2 * np.pi * 3.0 * t) > -0.2)
@@ -56,7 +57,8 @@ def test_pink_noise_falls_with_frequency():
     n = A.make_noise(np.zeros(4 * SR, np.float32), "pink", np.random.default_rng(0))
     f, p = welch(n, SR, nperseg=4096)
     low, high = p[(f > 100) & (f < 200)].mean(), p[(f > 3200) & (f < 6400)].mean()
-    assert 10 * np.log10(low / high) == pytest.approx(10 * np.log10(32), abs=2.0)  # 1/f: ~15 dB over 5 octaves
+    # 1/f: ~15 dB over 5 octaves
+    assert 10 * np.log10(low / high) == pytest.approx(10 * np.log10(32), abs=2.0)
 
 
 @pytest.mark.parametrize("rt60", [0.2, 0.5, 0.8])
@@ -75,7 +77,8 @@ def test_reverb_decays_at_the_asked_rt60(rt60):
 
     def decay(x):  # seconds after the first burst ends until the level is 20 dB below the burst's
         hop = SR // 200
-        e = 10 * np.log10(np.mean(x[: len(x) // hop * hop].reshape(-1, hop).astype(np.float64) ** 2, 1) + 1e-15)
+        e = 10 * np.log10(np.mean(x[: len(x) // hop * hop].reshape(-1, hop).astype(np.float64) ** 2, 1)
+                          + 1e-15)
         ref, end = e[int(0.55 * 200): int(0.59 * 200)].mean(), int(0.6 * 200)
         return np.argmax(e[end:] < ref - 20) / 200
 
@@ -170,13 +173,15 @@ def test_augment_is_deterministic_for_a_seed():
     assert info_c != info_a and not np.array_equal(a[: len(c)], c[: len(a)])
     assert set(info_a) == {"pitch_semitones", "formant_factor", "tempo_factor", "reverb", "noise", "band_hz",
                            "codec", "level_dbfs"}
-    assert len(a) == round(len(x) * scale_a) and scale_a == pytest.approx(1 / info_a["tempo_factor"], rel=0.01)
+    assert len(a) == round(len(x) * scale_a) and scale_a == pytest.approx(1 / info_a["tempo_factor"],
+                                                                          rel=0.01)
     assert A.rms_dbfs(a) == pytest.approx(info_a["level_dbfs"], abs=0.5)
     assert a.dtype == np.float32 and np.isfinite(a).all()
 
 
 def test_augment_with_nothing_drawn_returns_the_clip():
-    none = A.AugmentSpec(p_pitch=0, p_formant=0, p_tempo=0, p_reverb=0, p_noise=0, p_band=0, p_codec=0, p_level=0)
+    none = A.AugmentSpec(p_pitch=0, p_formant=0, p_tempo=0, p_reverb=0, p_noise=0, p_band=0, p_codec=0,
+                         p_level=0)
     x = _speechlike()
     y, scale, info = A.augment(x, SR, 0, none)
     assert np.array_equal(x, y) and scale == 1.0 and info == {}

@@ -27,7 +27,8 @@ SENTENCES = ("What an excellent room you have, sir.", "Such expensive furnishing
 
 
 def cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "facegen", *args], capture_output=True, text=True, timeout=600,
+    return subprocess.run([sys.executable, "-m", "facegen", *args], capture_output=True, text=True,
+                          timeout=600,
                           cwd=REPO, check=False, env=env)
 
 
@@ -38,7 +39,8 @@ def speech(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("speech")
     for i, sentence in enumerate(SENTENCES):
-        sf.write(folder / f"s{i}.wav", synthesize(sentence, pitch=40 + 10 * i, sample_rate=16000).audio, 16000,
+        sf.write(folder / f"s{i}.wav", synthesize(sentence, pitch=40 + 10 * i, sample_rate=16000).audio,
+                 16000,
                  subtype="PCM_16")
     return folder
 
@@ -108,9 +110,11 @@ def test_plans_that_lose_or_misplace_a_clip_are_refused(tmp_path):
         "shares its audio sidecar a.wav with line 2": [job(out, "a.usdc", 2), job(out, "a.glb", 3)],
         "outside the output folder": [job(out, "../a.usdc", 2)],
         "is outside": [job(out, "/tmp/elsewhere/a.usdc", 2)],
-        "would overwrite the audio of line 3": [job(out, "a.usdc", 2), job(out, "b.usdc", 3, audio="out/a.wav")],
+        "would overwrite the audio of line 3": [job(out, "a.usdc", 2), job(out, "b.usdc", 3,
+                                                                           audio="out/a.wav")],
         "is an input of line 3": [job(out, "a.json", 2),
-                                  Job(audio=tmp_path / "b.wav", output=out / "b.npy", line=3, alignment=out / "a.json")],
+                                  Job(audio=tmp_path / "b.wav", output=out / "b.npy", line=3,
+                                      alignment=out / "a.json")],
         "the batch's own report.json": [job(out, "report.json", 2)],
     }
     for message, jobs in refused.items():
@@ -200,7 +204,8 @@ def test_batch_in_worker_processes_writes_validates_reports_and_skips(speech, mo
 
 def test_the_main_process_aligns_waiting_items_as_a_worker_would(speech, tmp_path):
     """With transcripts, the main process force-aligns the last waiting items while the workers start: their
-    files equal the library's run in this process, and a wrong transcript is that item's error, the same line."""
+    files equal the library's run in this process, and a wrong transcript is that item's error, the same
+    line."""
     from facegen import animate
     from facegen.batch import one_line
 
@@ -210,12 +215,15 @@ def test_the_main_process_aligns_waiting_items_as_a_worker_would(speech, tmp_pat
     with open(manifest, "w", newline="") as f:
         csv.writer(f).writerows([("audio", "text", "output")] + [(a, t, f"{n}-{a[:2]}.npy")
                                                                   for n, (a, t) in enumerate(rows)])
-    outcome = run_manifest(manifest, tmp_path / "out", jobs=2, device="cpu")  # the default model: words and phones
+    # the default model: words and phones
+    outcome = run_manifest(manifest, tmp_path / "out", jobs=2, device="cpu")
     assert [r.status for r in outcome.results] == ["passed"] * 4 + ["error"]
     from multiprocessing import forkserver
-    assert forkserver._forkserver._forkserver_pid is None  # stopped at the end: its teardown would hold our pipes
+    # stopped at the end: its teardown would hold our pipes
+    assert forkserver._forkserver._forkserver_pid is None
     last = outcome.results[-1]
-    assert last.job.aligned is not None  # the last chunk waits until a worker is free: the main process aligned it
+    # the last chunk waits until a worker is free: the main process aligned it
+    assert last.job.aligned is not None
     assert last.seconds >= last.job.aligned.seconds > 0
     with pytest.raises(FacegenError) as here:
         animate(speech / "s2.wav", text=wrong, device="cpu")

@@ -76,7 +76,8 @@ def run_check(blender_python: Path, args: list[str], tmp_path: Path, env: dict |
     """Run blender_check.py in the Blender venv (TMPDIR inside tmp_path); its result line as a dict."""
     temp = tmp_path / "tmp"
     temp.mkdir(exist_ok=True)
-    done = subprocess.run([str(blender_python), str(CHECK), *args], capture_output=True, text=True, timeout=300,
+    done = subprocess.run([str(blender_python), str(CHECK), *args], capture_output=True, text=True,
+                          timeout=300,
                           cwd=tmp_path, check=False, env={**os.environ, "TMPDIR": str(temp), **(env or {})})
     lines = [line for line in done.stdout.splitlines() if line.startswith("blender_check: ")]
     assert lines, f"blender_check printed no result (exit {done.returncode}):\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
@@ -189,7 +190,8 @@ def test_read_weights_json_and_csv(tmp_path):
     # 60 rows a second on a 30 fps timecode: two rows per whole frame, told apart by the sub-frame
     lines = (tmp_path / "b.csv").read_text().splitlines()[:3]
     lines[2] = lines[1].replace(":00.000,", ":00.500,", 1)
-    (tmp_path / "c.csv").write_text("\n".join(lines + [lines[1].replace("10:00:00:00.000", "10:00:01:29.500")]))
+    (tmp_path / "c.csv").write_text("\n".join(lines + [lines[1].replace("10:00:00:00.000",
+                                                                        "10:00:01:29.500")]))
     clip = facegen_arkit.read_weights(tmp_path / "c.csv")
     assert clip["fps"] == 30
     np.testing.assert_allclose(clip["frames"], [0, 0.5, 59.5])
@@ -198,8 +200,10 @@ def test_read_weights_json_and_csv(tmp_path):
 @pytest.mark.parametrize("content, message", [
     ("{\"weightMat\": [[0.1]]}", "not an Audio2Face blend-shape JSON"),
     (json.dumps({"exportFps": 25, "facsNames": ["a", "b"], "weightMat": [[0.1, 0.2]]}), "not ARKit-shaped"),
-    (json.dumps({"exportFps": 25, "facsNames": ["jawOpen"], "weightMat": [[0.1, 0.2]]}), "expected [frames, 1]"),
-    (json.dumps({"exportFps": 25, "numFrames": 3, "facsNames": ["jawOpen"], "weightMat": [[0.1]]}), "numFrames"),
+    (json.dumps({"exportFps": 25, "facsNames": ["jawOpen"], "weightMat": [[0.1, 0.2]]}),
+     "expected [frames, 1]"),
+    (json.dumps({"exportFps": 25, "numFrames": 3, "facsNames": ["jawOpen"], "weightMat": [[0.1]]}),
+     "numFrames"),
     (json.dumps({"exportFps": 0, "facsNames": ["jawOpen"], "weightMat": [[0.1]]}), "exportFps"),
     ("[1, 2", "not an Audio2Face blend-shape JSON"),
 ])
@@ -243,7 +247,8 @@ def arkit_files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("arkit")
     weights = {"json": arkit_weights(50, seed=1), "csv": arkit_weights(45, seed=2)}
     write_audio2face(folder / "talk.json", weights["json"], 25)
-    write_wav((0.1 * np.sin(np.arange(32000) / 5)).astype(np.float32), 16000, folder / "talk.wav")  # 2 s = 50 frames
+    # 2 s = 50 frames
+    write_wav((0.1 * np.sin(np.arange(32000) / 5)).astype(np.float32), 16000, folder / "talk.wav")
     write_live_link(folder / "take.csv", weights["csv"], 30)
     (folder / "bad.json").write_text(json.dumps({"exportFps": 25, "facsNames": ["x"], "weightMat": [[0.0]]}))
     write_audio2face(folder / "long.json", arkit_weights(1500, seed=4), 25)  # 60 s
@@ -282,11 +287,13 @@ def test_blender_applies_arkit_weights_by_name(blender_python, arkit_files, tmp_
     done = csv_run["import"]  # fps from the Timecode frames; no WAV beside it: a warning, no sound
     assert done["frames"] == 45 and sorted(done["unmatched"]) == sorted(unmatched) and done["sound"] is None
     assert done["warnings"] and "no sound" in done["warnings"][0]
-    assert (csv_run["scene"]["fps"], csv_run["scene"]["frame_end"], csv_run["scene"]["sounds"]) == (30, 44, [])
+    assert (csv_run["scene"]["fps"], csv_run["scene"]["frame_end"], csv_run["scene"]["sounds"]) == (30, 44,
+                                                                                                    [])
     assert_keyed(csv_run["values"]["Character"], expected_values(weights["csv"], CHARACTER_KEYS, frames))
 
     missing, unnamed, bare, bad = result["errors"]
-    assert missing.startswith("no object named 'Nobody': the objects are ") and "Character, Other, Prop" in missing
+    assert missing.startswith("no object named 'Nobody': the objects "
+                              "are ") and "Character, Other, Prop" in missing
     assert "'Other' has no shape key named like ARKit's" in unnamed and "Basis, smile, Key 1" in unnamed
     assert "'Prop'" in bare and "it has no shape keys" in bare
     assert "bad.json: not ARKit-shaped" in bad
@@ -294,7 +301,8 @@ def test_blender_applies_arkit_weights_by_name(blender_python, arkit_files, tmp_
 
     timed = result["timed"]
     assert (timed["keys"], timed["frames"]) == (52, 1500)
-    sys.stdout.write(f"60 s JSON onto 52 shape keys of {timed['vertices']} vertices: {timed['seconds']:.2f} s\n")
+    sys.stdout.write(f"60 s JSON onto 52 shape keys of {timed['vertices']} vertices: {timed['seconds']:.2f} "
+                     "s\n")
 
 
 def test_blender_addon_installs_as_facegen_blender(blender_python, arkit_files, tmp_path):
@@ -304,7 +312,8 @@ def test_blender_addon_installs_as_facegen_blender(blender_python, arkit_files, 
             "apply": [{"file": str(folder / "talk.json"), "target": "Character"}]}
     (tmp_path / "spec.json").write_text(json.dumps(spec))
     user = tmp_path / "blender-user"  # the add-on installs here, not in the home folder
-    result = run_check(blender_python, ["--addon", str(addon), "--arkit", str(tmp_path / "spec.json")], tmp_path,
+    result = run_check(blender_python, ["--addon", str(addon), "--arkit", str(tmp_path / "spec.json")],
+                       tmp_path,
                        env={"BLENDER_USER_RESOURCES": str(user)})
     installed = result["addon"]
     assert installed["module"] == str(user / "scripts" / "addons" / "facegen_blender" / "__init__.py")

@@ -47,7 +47,8 @@ def test_animate_writes_valid_assets(work, ext, biwi_template):
     d, speech = work
     out = d / f"anim_{ext}" / f"clip.{ext}"
     out.parent.mkdir()
-    p = run("animate", d / "speech.wav", "--text", SENTENCE, "--speaker", "3", "--model", d / "model.safetensors",
+    p = run("animate", d / "speech.wav", "--text", SENTENCE, "--speaker", "3", "--model",
+            d / "model.safetensors",
             "-o", out)
     assert p.returncode == 0, p.stderr
     T = round(len(speech.audio) / speech.sample_rate * 25)
@@ -65,7 +66,8 @@ def test_animate_writes_valid_assets(work, ext, biwi_template):
         times = mesh.GetPointsAttr().GetTimeSamples()
         assert times == list(range(T))
         v = np.stack([np.asarray(mesh.GetPointsAttr().Get(t)) for t in (0, T // 2, T - 1)])
-        assert np.array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), biwi_template.faces)
+        assert np.array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3),
+                              biwi_template.faces)
     moved = np.abs(v - biwi_template.vertices[None]).max()
     assert 1e-4 < moved < 0.25 * biwi_template.size
     val = run("validate", out, "--model", d / "model.safetensors", "--fps", "25", "--json")
@@ -75,7 +77,8 @@ def test_animate_writes_valid_assets(work, ext, biwi_template):
 
 def test_alignment_file_and_no_text_and_text_file(work):
     d, _ = work
-    for i, extra in enumerate((["--alignment", d / "words.json"], ["--no-text"], ["--text-file", d / "line.txt"])):
+    for i, extra in enumerate((["--alignment", d / "words.json"], ["--no-text"], ["--text-file",
+                                                                                  d / "line.txt"])):
         out = d / f"variant{i}.npy"
         p = run("animate", d / "speech.wav", *extra, "--model", d / "model.safetensors", "-o", out, "-q")
         assert p.returncode == 0, p.stderr
@@ -195,7 +198,8 @@ def test_help_is_fast_and_lists_commands():
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["data", "synth", "{d}/out", "--preset", "voices", "--subjects", "F2"], "do not apply to --preset voices"),
+    (["data", "synth", "{d}/out", "--preset", "voices", "--subjects", "F2"],
+     "do not apply to --preset voices"),
     (["data", "synth", "{d}/out", "--limit", "3"], "--limit applies to --preset voices only"),
     (["align", "{speech}", "--phones"], "--phones needs the transcript"),
     (["align", "{speech}", "--text", "hi", "--phones", "-o", "{d}/out.csv"], "use .json or .TextGrid"),
@@ -217,7 +221,8 @@ def test_align_phones_writes_words_and_phones(tmp_path):
 
     speech = synthesize("Please bring my map.", voice="en-us", rate=150)
     write_wav(speech.audio, speech.sample_rate, tmp_path / "s.wav")
-    proc = run("align", tmp_path / "s.wav", "--text", "Please bring my map.", "--phones", "-o", tmp_path / "a.json")
+    proc = run("align", tmp_path / "s.wav", "--text", "Please bring my map.", "--phones", "-o",
+               tmp_path / "a.json")
     assert proc.returncode == 0, proc.stderr
     data = json.loads((tmp_path / "a.json").read_text())
     assert [w["word"] for w in data["words"]] == ["Please", "bring", "my", "map"]

@@ -152,7 +152,8 @@ def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     again = Dataset(toy, cache_dir=toy / "cache1", warn=None).load(seqs, feats, filters, gpt2_backend)
     np.testing.assert_array_equal(again[1].mel, items[1].mel)
     np.testing.assert_array_equal(again[1].text, items[1].text)
-    assert {p: p.stat().st_mtime_ns for p in (toy / "cache1" / "features").iterdir()} == stamps  # read, not redone
+    # read, not redone
+    assert {p: p.stat().st_mtime_ns for p in (toy / "cache1" / "features").iterdir()} == stamps
 
     # a changed wav file is noticed (size/mtime in the key): its mel is recomputed into a new entry
     wav = toy / "wav" / "F2_e01.wav"

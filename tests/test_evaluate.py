@@ -189,7 +189,8 @@ def test_evaluate_refuses_mismatches(toy, bundle_path, tmp_path):
     with pytest.raises(FacegenError, match="have 200 vertices but the model 40"):
         evaluate(other.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
     narrow = make_bundle(grid_face(), tmp_path / "narrow.safetensors", speakers=("F2", "F3"), text_dim=100)
-    with pytest.raises(FacegenError, match=r"gives 384-d features but the model was trained on 100-d \(minilm\)"):
+    with pytest.raises(FacegenError, match=r"gives 384-d features but the model was trained on 100-d "
+                                           r"\(minilm\)"):
         evaluate(narrow.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
 
 

@@ -1,4 +1,5 @@
-"""ARKit weight files: Audio2Face JSON and Live Link Face CSV, reopened with json/csv, validated, and the CLI."""
+"""ARKit weight files: Audio2Face JSON and Live Link Face CSV, reopened with json/csv, validated, and the
+CLI."""
 
 from __future__ import annotations
 
@@ -148,7 +149,8 @@ def run(*args) -> subprocess.CompletedProcess:
 
 def test_cli_animate_json_with_the_default_model(tmp_path):
     out = tmp_path / "room.json"
-    p = run("animate", "examples/excellent_room.wav", "--text-file", "examples/excellent_room.txt", "-o", out, "-q")
+    p = run("animate", "examples/excellent_room.wav", "--text-file", "examples/excellent_room.txt", "-o", out,
+            "-q")
     assert p.returncode == 0, p.stderr
     doc = json.loads(out.read_text())
     assert doc["facsNames"] == list(ARKIT_NAMES) and doc["numFrames"] == len(doc["weightMat"]) > 50
@@ -161,7 +163,8 @@ def test_cli_animate_json_with_the_default_model(tmp_path):
 
 def test_cli_model_without_the_rig_is_one_line_exit_2(tmp_path):
     make_bundle(grid_face(), tmp_path / "grid.safetensors")
-    p = run("animate", "examples/excellent_room.wav", "--no-text", "--model", tmp_path / "grid.safetensors", "-q",
+    p = run("animate", "examples/excellent_room.wav", "--no-text", "--model", tmp_path / "grid.safetensors",
+            "-q",
             "--device", "cpu", "-o", tmp_path / "out.csv")
     assert p.returncode == 2, p.stderr
     lines = p.stderr.strip().splitlines()

@@ -249,13 +249,16 @@ def test_mp3_is_in_sync_with_the_motion(clip, tmp_path):
     out = tmp_path / "sync.glb"
     write_animation(clip, out)
     data = gltf.GltfFile(out).mp3_audio()
-    assert data[:2] in (b"\xff\xf3", b"\xff\xfb") and b"Xing" not in data[:1000] and b"Info" not in data[:1000]
+    assert data[:2] in (b"\xff\xf3",
+                        b"\xff\xfb") and b"Xing" not in data[:1000] and b"Info" not in data[:1000]
     decoded, rate = mp3.decode(data)
     assert rate == clip.sample_rate
     import imageio_ffmpeg
 
-    ffmpeg = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-i", "pipe:0",
-                             "-f", "f32le", "-ac", "1", "pipe:1"], input=data, capture_output=True, check=True).stdout
+    ffmpeg = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-i",
+                             "pipe:0",
+                             "-f", "f32le", "-ac", "1", "pipe:1"], input=data, capture_output=True,
+                            check=True).stdout
     for samples in (decoded, np.frombuffer(ffmpeg, np.float32)):
         lag = mp3.lag(samples, clip.audio)
         assert abs(lag) <= 2, f"MP3 is {lag} samples off"
@@ -301,7 +304,8 @@ def test_validate_glb_passes_khronos_and_every_check(clip, tmp_path):
     report = validate(out, template=template, fps=25.0, reference=tmp_path / "source.npy")
     assert report.ok, report.to_text()
     names = {c.name for c in report.checks}
-    assert {"gltf-validator", "time samples", "reconstruction", "audio sync", "embedded audio duration"} <= names
+    assert {"gltf-validator", "time samples", "reconstruction", "audio sync",
+            "embedded audio duration"} <= names
     assert "0 errors, 0 warnings" in report.check("gltf-validator").detail
     assert "against the reference" in report.check("reconstruction").detail
     # a reference the file does not reproduce fails the reconstruction check
@@ -357,7 +361,8 @@ def test_sixty_seconds_fit_in_five_megabytes(tmp_path):
     files = write_animation(anim, tmp_path / "minute.glb")
     size = files[0].stat().st_size
     # 4.88 MB at 0dc2807; the rig's visemes for espeak phonemes were corrected since (facegen.phonetics, one
-    # measured table), so the same random clip moves more: 5.14 MB, same writer, same bytes for the same frames
+    # measured table), so the same random clip moves more: 5.14 MB, same writer, same bytes for the same
+    # frames
     assert size <= 5_200_000, f"{size} bytes"
     info = _doc(files[0]).asset.extras["facegen"]
     assert info["reconstructionError"] <= pca.DEFAULT_TOLERANCE
@@ -375,7 +380,7 @@ def test_input_audio_beside_the_output_is_kept(clip, tmp_path):
     assert gltf.GltfFile(tmp_path / "clip.glb").mp3_audio() is not None
 
 
-# ---- --rig arkit ---------------------------------------------------------------------------------------------
+# ---- --rig arkit -------------------------------------------------------------------------------------------
 
 
 def test_arkit_rig_glb_has_the_52_named_shapes_and_passes_khronos(clip, tmp_path):
@@ -395,7 +400,8 @@ def test_arkit_rig_glb_has_the_52_named_shapes_and_passes_khronos(clip, tmp_path
     assert np.allclose(decoded["weights"], fit.weights)
     assert 0 <= decoded["weights"].min() <= decoded["weights"].max() <= 1
     jaw_open = decoded["weights"][:, ARKIT_NAMES.index("jawOpen")]
-    assert jaw_open.max() > 0.2 and int(np.argmax(jaw_open)) in range(_open_frame(clip) - 2, _open_frame(clip) + 3)
+    assert jaw_open.max() > 0.2 and int(np.argmax(jaw_open)) in range(_open_frame(clip) - 2, _open_frame(clip)
+                                                                      + 3)
     info = doc.asset.extras["facegen"]
     assert info["rig"] == "arkit" and info["morphTargets"] == 52
     assert info["lipErrorMm"] == pytest.approx(fit.lip_error_mm)
@@ -408,7 +414,8 @@ def test_arkit_rig_glb_has_the_52_named_shapes_and_passes_khronos(clip, tmp_path
     assert "0 errors, 0 warnings" in report.check("gltf-validator").detail
     assert "against the reference" in report.check("reconstruction").detail
     rig = report.check("rig").detail
-    assert rig.startswith("ARKit: 52 of 52 shapes (eyeBlinkLeft, ") and "tongueOut)" in rig and "lip error" in rig
+    assert rig.startswith("ARKit: 52 of 52 shapes "
+                          "(eyeBlinkLeft, ") and "tongueOut)" in rig and "lip error" in rig
 
 
 def test_rig_option_errors(clip, tmp_path, grid_mesh):
@@ -416,7 +423,8 @@ def test_rig_option_errors(clip, tmp_path, grid_mesh):
 
     bad = {
         "unknown rig": (clip, "x.glb", {"rig": "metahuman"}, "unknown rig 'metahuman'"),
-        "pca sizing": (clip, "x.glb", {"rig": "arkit", "morph_targets": 8}, "--morph-targets size the PCA basis"),
+        "pca sizing": (clip, "x.glb", {"rig": "arkit", "morph_targets": 8},
+                       "--morph-targets size the PCA basis"),
         "usd points": (clip, "x.usda", {"rig": "arkit", "mode": "points"}, "drop the points mode"),
         "other format": (clip, "x.npy", {"rig": "arkit"}, "rig does not apply to .npy files"),
         "no regions": (make_animation(grid_mesh, frames=5), "x.glb", {"rig": "arkit"}, "region"),
@@ -465,7 +473,8 @@ def test_cli_animate_rig_arkit_usd_is_blendshapes(tmp_path):
     speech = synthesize("Open the window wide.", voice="en-us")
     sf.write(tmp_path / "line.wav", speech.audio, speech.sample_rate)
     out = tmp_path / "line.usdc"
-    done = _cli("animate", tmp_path / "line.wav", "--text", "Open the window wide.", "--rig", "arkit", "-o", out, "-q")
+    done = _cli("animate", tmp_path / "line.wav", "--text", "Open the window wide.", "--rig", "arkit", "-o",
+                out, "-q")
     assert done.returncode == 0, done.stderr
     assert usd_skel.shape_names(find_mesh(open_stage(out))) == list(ARKIT_NAMES)
     checked = _cli("validate", out, "--json")

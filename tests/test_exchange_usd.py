@@ -53,7 +53,8 @@ def test_usd_file_contents(tmp_path, grid_mesh, ext):
 
     # topology: triangles, the template's face list, no subdivision
     assert list(mesh.GetFaceVertexCountsAttr().Get()) == [3] * len(grid_mesh.faces)
-    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), grid_mesh.faces)
+    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3),
+                                  grid_mesh.faces)
     assert mesh.GetSubdivisionSchemeAttr().Get() == UsdGeom.Tokens.none
     assert mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.rightHanded
 
@@ -61,7 +62,8 @@ def test_usd_file_contents(tmp_path, grid_mesh, ext):
     assert times == [float(i) for i in range(50)]
     assert points.dtype == np.float32 and points.shape == (50, grid_mesh.num_vertices, 3)
     np.testing.assert_array_equal(points, anim.vertices)
-    np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get(Usd.TimeCode.Default())), grid_mesh.vertices)
+    np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get(Usd.TimeCode.Default())),
+                                  grid_mesh.vertices)
     extent = mesh.GetExtentAttr()
     assert list(extent.GetTimeSamples()) == times
     for i in (0, 17, 49):
@@ -90,7 +92,8 @@ def test_usd_file_contents(tmp_path, grid_mesh, ext):
     assert "gone" not in meta and '"word": "hi"' in meta["words"]
 
 
-@pytest.mark.parametrize(("name", "mode"), [("p.usda", "points"), ("b.usdc", "blendshapes"), ("z.usdz", "points"),
+@pytest.mark.parametrize(("name", "mode"), [("p.usda", "points"), ("b.usdc", "blendshapes"),
+                                            ("z.usdz", "points"),
                                            ("zb.usdz", "blendshapes")])
 def test_uvs_display_colour_and_skin_material(tmp_path, grid_mesh, name, mode):
     from pxr import UsdShade

@@ -247,7 +247,8 @@ def test_validate_blendshapes(tmp_path, grid_mesh):
     write_animation(rich_animation(grid_mesh), out, mode="blendshapes")
     report = validate(out, template=grid_mesh, fps=FPS)
     assert report.ok and report.warnings == [], report.to_text()
-    for name in ("blendshapes", "reconstruction", "rig", "vertex count", "faces", "frame rate", "time samples",
+    for name in ("blendshapes", "reconstruction", "rig", "vertex count", "faces", "frame rate",
+                 "time samples",
                  "finite", "displacement", "audio", "audio duration", "usd validators"):
         assert report.check(name) is not None and report.check(name).ok, name
     assert report.check("time samples").detail == f"{FRAMES} frames, one at each of 0..{FRAMES - 1}"
@@ -343,7 +344,8 @@ def test_arkit_rig_blend_shapes(tmp_path, name):
     stage = Usd.Stage.Open(str(out))
     mesh = stage.GetPrimAtPath("/Face/Mesh")
     assert list(UsdSkel.BindingAPI(mesh).GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
-    assert [p.name for p in UsdSkel.BindingAPI(mesh).GetBlendShapeTargetsRel().GetTargets()] == list(ARKIT_NAMES)
+    assert [p.name
+            for p in UsdSkel.BindingAPI(mesh).GetBlendShapeTargetsRel().GetTargets()] == list(ARKIT_NAMES)
     animation = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skeleton/Animation"))
     assert list(animation.GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
     fit = fit_arkit(anim)

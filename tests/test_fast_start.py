@@ -1,7 +1,7 @@
-"""Fast start, through real `python -m facegen` processes: complete outputs and unchanged exit codes although the
-process skips the interpreter's teardown, imports only what a command needs, quiet when nothing is wrong (no CPU
-note, no progress-bar frames in logs), the profile still printed. No timed asserts: benchmarks/bench_start.py
-measures the time."""
+"""Fast start, through real `python -m facegen` processes: complete outputs and unchanged exit codes although
+the process skips the interpreter's teardown, imports only what a command needs, quiet when nothing is wrong
+(no CPU note, no progress-bar frames in logs), the profile still printed. No timed asserts:
+benchmarks/bench_start.py measures the time."""
 
 from __future__ import annotations
 
@@ -32,9 +32,12 @@ def facegen(*args, env: dict | None = None, **kwargs) -> subprocess.CompletedPro
 
 def imported(args: list, cwd: Path | None = None) -> tuple[subprocess.CompletedProcess, set[str]]:
     """Run `python -X importtime -m facegen ARGS`: the result and the top-level packages it imported."""
-    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "facegen", *map(str, args)], capture_output=True,
-                          text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"}, cwd=cwd, timeout=600, check=False)
-    names = {m.group(1).split(".")[0] for m in re.finditer(r"^import time:.*\|\s*(\S+)$", proc.stderr, re.MULTILINE)}
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "facegen", *map(str, args)],
+                          capture_output=True,
+                          text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"}, cwd=cwd, timeout=600,
+                          check=False)
+    names = {m.group(1).split(".")[0] for m in re.finditer(r"^import time:.*\|\s*(\S+)$", proc.stderr,
+                                                           re.MULTILINE)}
     assert "click" in names, proc.stderr[-2000:]  # the listing is there: an empty one proves nothing
     return proc, names
 
@@ -72,7 +75,8 @@ def test_animate_says_only_what_it_wrote_and_the_profile(animated):
     assert lines[0].startswith("facegen: wrote ") and "out.usdc" in lines[0] and len(lines) == 2, proc.stderr
     profile = json.loads(lines[1])  # FACEGEN_PROFILE=1: still printed, by the atexit handler before os._exit
     stages = profile["facegen_profile"]
-    assert {"model_load", "alignment", "text_model_load", "text_features", "inference", "writing"} <= stages.keys()
+    assert {"model_load", "alignment", "text_model_load", "text_features", "inference",
+            "writing"} <= stages.keys()
     assert "transformers" not in profile["heavy_modules"] and "scipy" not in profile["heavy_modules"]
     assert proc.stdout == ""
 
@@ -102,8 +106,10 @@ def test_exit_codes_are_unchanged(tmp_path):
 
 def test_ctrl_c_still_exits_130_and_leaves_nothing(tmp_path):
     out = tmp_path / "out.usda"
-    proc = subprocess.Popen([sys.executable, "-m", "facegen", "animate", str(WAV), "--no-text", "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    proc = subprocess.Popen([sys.executable, "-m", "facegen", "animate", str(WAV), "--no-text", "-o",
+                             str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ,
+                                                                                 "HF_HUB_OFFLINE": "1"})
     deadline = time.monotonic() + 300
     while not any(p.name.startswith(".out.") for p in tmp_path.iterdir()) and proc.poll() is None:
         assert time.monotonic() < deadline
@@ -166,8 +172,10 @@ def test_progress_in_a_log_is_one_summary_line_at_most():
                         kept.stderr), kept.stderr
     transient = subprocess.run(run + [bar_script(leave=False)], capture_output=True, text=True, check=True)
     assert transient.stderr == "" and transient.stdout == "3\n"
-    quiet = subprocess.run(run + [bar_script(leave=True, enabled=False)], capture_output=True, text=True, check=True)
-    assert quiet.stderr.count("\n") == 1 and "render" not in quiet.stderr  # only the enabled 'import' bar speaks
+    quiet = subprocess.run(run + [bar_script(leave=True, enabled=False)], capture_output=True, text=True,
+                           check=True)
+    # only the enabled 'import' bar speaks
+    assert quiet.stderr.count("\n") == 1 and "render" not in quiet.stderr
 
 
 def test_progress_on_a_terminal_is_a_bar():
@@ -178,7 +186,8 @@ def test_progress_on_a_terminal_is_a_bar():
 
     main, child = pty.openpty()
     fcntl.ioctl(child, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal 100 columns wide
-    proc = subprocess.Popen([sys.executable, "-c", bar_script(leave=True)], stdout=subprocess.PIPE, stderr=child)
+    proc = subprocess.Popen([sys.executable, "-c", bar_script(leave=True)], stdout=subprocess.PIPE,
+                            stderr=child)
     os.close(child)
     out, _ = proc.communicate(timeout=120)
     chunks = []

@@ -1,4 +1,5 @@
-"""Inference: block-wise forward equals one pass, bounded memory for long clips, devices, batches, profiles."""
+"""Inference: block-wise forward equals one pass, bounded memory for long clips, devices, batches,
+profiles."""
 
 from __future__ import annotations
 
@@ -46,14 +47,16 @@ def bundle(face):
 def features(T: int, seed: int = 0, text_dim: int = 384) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     t = np.arange(T)[:, None]
-    mel = (-50 + 20 * np.sin(t / 7.0 + rng.uniform(0, 6, 128)) + rng.normal(0, 5, (T, 128))).astype(np.float32)
+    mel = (-50 + 20 * np.sin(t / 7.0 + rng.uniform(0, 6, 128))
+           + rng.normal(0, 5, (T, 128))).astype(np.float32)
     text = np.repeat(rng.normal(0, 1, (T // 10 + 1, text_dim)), 10, axis=0)[:T].astype(np.float32)
     return mel, text
 
 
 def one_pass(bundle, mel, text, speaker) -> np.ndarray:
     phones = None
-    if bundle.config.n_phones:  # a model with the phone stream, fed silence (as decoder_states does by default)
+    # a model with the phone stream, fed silence (as decoder_states does by default)
+    if bundle.config.n_phones:
         phones = torch.zeros(1, len(mel), bundle.config.n_phones)
         phones[..., 0] = 1.0
     with torch.inference_mode():
@@ -98,7 +101,8 @@ def test_default_model_blockwise_equals_one_pass(clips):
     got = np.asarray(frame_stream(bundle, states, bundle.template.vertices, block_frames=64))
     err = np.linalg.norm(got - ref, axis=-1).max() / bundle.template.size
     motion = np.linalg.norm(ref - bundle.template.vertices, axis=-1).max() / bundle.template.size
-    print(f"default model, {len(mel)} frames: largest difference {err:.2e} of the face size (motion {motion:.3f})")
+    print(f"default model, {len(mel)} frames: largest difference {err:.2e} of the face size (motion "
+          f"{motion:.3f})")
     assert motion > 1e-3 and err <= 1e-5
 
 
@@ -169,7 +173,8 @@ def test_long_clip_streams_in_bounded_memory(tmp_path):
     script = tmp_path / "stream.py"
     script.write_text(MEMORY_SCRIPT.format(tests=str(REPO / "tests")))
     out = tmp_path / "long.npy"
-    proc = subprocess.run([sys.executable, str(script), str(T), str(out)], check=False, capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, str(script), str(T), str(out)], check=False, capture_output=True,
+                          text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stderr
     r = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -186,7 +191,8 @@ def test_device_selection_and_fallback():
     if torch.cuda.is_available():
         assert select_device("auto").type == "cuda"
         return
-    assert select_device("auto").type == "cpu"  # quietly (tests/test_fast_start.py: animate says nothing of it)
+    # quietly (tests/test_fast_start.py: animate says nothing of it)
+    assert select_device("auto").type == "cpu"
     assert select_device("cpu").type == "cpu"
     with pytest.raises(FacegenError, match="no CUDA GPU"):
         select_device("cuda")
@@ -251,7 +257,8 @@ def test_run_batch_writes_every_output_and_reports_failures(bundle, clips, tmp_p
     _, items = clips
     jobs = [Job(audio=wav, output=tmp_path / "out" / f"{wav.stem}.npy", alignment=words)
             for wav, words in items[:2]]
-    jobs.append(Job(audio=items[2][0], output=tmp_path / "out" / "bad.npy", alignment=items[2][1], speaker="Z9"))
+    jobs.append(Job(audio=items[2][0], output=tmp_path / "out" / "bad.npy", alignment=items[2][1],
+                    speaker="Z9"))
     said = []
     results = run_batch(jobs, animator=Animator(bundle, device="cpu"), say=said.append)
     assert [r.ok for r in results] == [True, True, False] and "unknown speaker" in results[2].error
@@ -270,10 +277,12 @@ def test_read_manifest(tmp_path):
                                     "d.wav,,,,,\n")
     jobs = read_manifest(tmp_path / "m.csv", outdir=tmp_path / "o")
     assert [j.audio for j in jobs] == [tmp_path / n for n in ("a.wav", "b.wav", "c.wav", "d.wav")]
-    assert [j.output for j in jobs] == [tmp_path / "o" / n for n in ("out/a.glb", "b.usdc", "c.npy", "d.usdc")]
+    assert [j.output for j in jobs] == [tmp_path / "o" / n for n in ("out/a.glb", "b.usdc", "c.npy",
+                                                                     "d.usdc")]
     assert [j.text for j in jobs] == ["Hello there.", "Good morning", None, None]
     assert jobs[2].alignment == tmp_path / "c.json" and [j.speaker for j in jobs] == ["F2", "1", None, None]
-    (tmp_path / "m.json").write_text(json.dumps({"jobs": [{"audio": "a.wav", "text": "Hi", "output": "a.usda"}]}))
+    (tmp_path / "m.json").write_text(json.dumps({"jobs": [{"audio": "a.wav", "text": "Hi",
+                                                           "output": "a.usda"}]}))
     (job,) = read_manifest(tmp_path / "m.json")
     assert job.output == tmp_path / "a.usda" and job.text == "Hi"
     (tmp_path / "bad.csv").write_text("audio,words\na.wav,hi\n")

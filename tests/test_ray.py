@@ -1,5 +1,5 @@
-"""`facegen batch --engine ray`: a local Ray instance on 127.0.0.1 runs a manifest as actor tasks and writes the
-same files as the local engine; an unreachable cluster is one line and exit 2. Skipped without Ray."""
+"""`facegen batch --engine ray`: a local Ray instance on 127.0.0.1 runs a manifest as actor tasks and writes
+the same files as the local engine; an unreachable cluster is one line and exit 2. Skipped without Ray."""
 
 from __future__ import annotations
 
@@ -39,7 +39,8 @@ def batch_inputs(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("ray")
     for i, sentence in enumerate(("Such expensive furnishings!", "What an excellent room you have, sir.")):
-        sf.write(folder / f"s{i}.wav", synthesize(sentence, pitch=50 + 10 * i, sample_rate=16000).audio, 16000,
+        sf.write(folder / f"s{i}.wav", synthesize(sentence, pitch=50 + 10 * i, sample_rate=16000).audio,
+                 16000,
                  subtype="PCM_16")
     model = folder / "small.safetensors"
     make_bundle(grid_face(12, 10, height=0.8, bend=2.0), model, modalities="audio", speakers=("F2", "M3"))
@@ -50,9 +51,11 @@ def batch_inputs(tmp_path_factory):
 
 def test_ray_engine_writes_what_the_local_engine_writes(cluster, batch_inputs, tmp_path):
     manifest, model = batch_inputs
-    on_ray = run_manifest(manifest, tmp_path / "ray", engine="ray", formats="npy,usda", model=model, device="cpu")
+    on_ray = run_manifest(manifest, tmp_path / "ray", engine="ray", formats="npy,usda", model=model,
+                          device="cpu")
     local = run_manifest(manifest, tmp_path / "local", jobs=1, formats="npy,usda", model=model, device="cpu")
-    assert [r.status for r in on_ray.results] == [r.status for r in local.results] == ["passed", "passed", "error"]
+    assert [r.status for r in on_ray.results] == [r.status for r in local.results] == ["passed", "passed",
+                                                                                       "error"]
     assert ray.is_initialized()  # the engine used this process's instance and left it running
     for name in ("s0.npy", "sub/s1.npy"):
         a, b = np.load(tmp_path / "ray" / name), np.load(tmp_path / "local" / name)
@@ -66,7 +69,8 @@ def test_ray_engine_writes_what_the_local_engine_writes(cluster, batch_inputs, t
     assert all(v["ok"] for item in report["items"][:2] for v in item["validation"])
     suite = ET.parse(tmp_path / "ray" / "report.xml").getroot().find("testsuite")
     assert (suite.get("tests"), suite.get("errors")) == ("3", "1")
-    again = run_manifest(manifest, tmp_path / "ray", engine="ray", formats="npy,usda", model=model, device="cpu")
+    again = run_manifest(manifest, tmp_path / "ray", engine="ray", formats="npy,usda", model=model,
+                         device="cpu")
     assert [r.status for r in again.results] == ["skipped", "skipped", "error"]
 
 
@@ -75,7 +79,8 @@ def test_unreachable_ray_address_is_one_line_exit_2(batch_inputs, tmp_path):
     with socket.socket() as s:  # a port nothing listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    proc = subprocess.run([sys.executable, "-m", "facegen", "batch", str(manifest), "-o", str(tmp_path / "out"),
+    proc = subprocess.run([sys.executable, "-m", "facegen", "batch", str(manifest), "-o",
+                           str(tmp_path / "out"),
                            "-m", str(model), "--engine", "ray", "--ray-address", f"127.0.0.1:{port}"],
                           capture_output=True, text=True, timeout=300, cwd=REPO, check=False)
     assert proc.returncode == 2, proc.stderr

@@ -1,5 +1,6 @@
-"""Property tests for every reader: whatever bytes a file holds, a reader returns a value or raises FacegenError
-— never another exception — and stays within bounded memory; writers round-trip what they write."""
+"""Property tests for every reader: whatever bytes a file holds, a reader returns a value or raises
+FacegenError — never another exception — and stays within bounded memory; writers round-trip what they
+write."""
 
 from __future__ import annotations
 
@@ -52,9 +53,11 @@ ANIMATIONS = {
     ".gltf": st.one_of(_noise(), st.recursive(st.none() | st.booleans() | st.floats() | st.text(max_size=8),
                                               lambda c: st.lists(c, max_size=4) | st.dictionaries(
                                                   st.sampled_from(["asset", "meshes", "buffers", "accessors",
-                                                                   "version", "uri", "count"]), c, max_size=4),
+                                                                   "version", "uri", "count"]), c,
+                                                  max_size=4),
                                               max_leaves=20).map(lambda v: json.dumps(v).encode())),
-    ".usda": st.one_of(_noise(b"#usda 1.0\n"), st.text(max_size=400).map(lambda t: ("#usda 1.0\n" + t).encode())),
+    ".usda": st.one_of(_noise(b"#usda 1.0\n"), st.text(max_size=400).map(lambda t: ("#usda 1.0\n"
+                                                                                    + t).encode())),
     ".usdc": st.one_of(_noise(), _noise(b"PXR-USDC")),
     ".usdz": st.one_of(_noise(), _noise(b"PK\x03\x04")),
 }
@@ -73,7 +76,8 @@ def test_animation_readers_on_arbitrary_bytes(suffix, tmp_path):
 ALIGNMENT_JSON = st.recursive(
     st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8),
     lambda c: st.lists(c, max_size=5) | st.dictionaries(
-        st.sampled_from(["word", "start", "end", "words", "segments", "text", "case", "alignedWord"]), c, max_size=5),
+        st.sampled_from(["word", "start", "end", "words", "segments", "text", "case", "alignedWord"]), c,
+        max_size=5),
     max_leaves=30).map(lambda v: json.dumps(v).encode())
 
 
@@ -146,7 +150,8 @@ def test_vl_reader_on_arbitrary_bytes(data):
         pass
 
 
-WORDS = st.lists(st.tuples(st.from_regex(r"[A-Za-z]([A-Za-z']{0,10}[A-Za-z])?", fullmatch=True), st.floats(0.01, 0.5),
+WORDS = st.lists(st.tuples(st.from_regex(r"[A-Za-z]([A-Za-z']{0,10}[A-Za-z])?", fullmatch=True),
+                           st.floats(0.01, 0.5),
                            st.floats(0.0, 0.3)), min_size=1, max_size=30)
 
 
@@ -170,7 +175,8 @@ def test_alignment_round_trip(tmp_path_factory, spec, suffix):
 
 @SETTINGS
 @given(st.dictionaries(st.from_regex(r"[A-Z][0-9]{1,2}", fullmatch=True),
-                       st.integers(1, 50).map(lambda v: np.random.default_rng(v).normal(size=(v, 3))), min_size=1,
+                       st.integers(1, 50).map(lambda v: np.random.default_rng(v).normal(size=(v, 3))),
+                       min_size=1,
                        max_size=4))
 def test_templates_pkl_round_trip(tmp_path_factory, templates):
     from facegen.datasets.templates import read_templates_pkl, write_templates_pkl

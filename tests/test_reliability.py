@@ -1,4 +1,5 @@
-"""Nothing half-written: temporaries of killed runs are cleaned, signals unwind like Ctrl-C, a full disk is one line."""
+"""Nothing half-written: temporaries of killed runs are cleaned, signals unwind like Ctrl-C, a full disk is
+one line."""
 
 from __future__ import annotations
 
@@ -68,7 +69,8 @@ def test_disk_full_while_writing_is_one_line(tmp_path):
 def _tmpfs(tmp_path: Path, size: str) -> Path:
     mount = tmp_path / "small"
     mount.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mount)],
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs",
+                                            str(mount)],
                                            check=False, capture_output=True).returncode != 0:
         pytest.skip("cannot mount a small tmpfs here (needs root)")
     return mount
@@ -97,7 +99,8 @@ def test_disk_full_on_a_small_tmpfs(tmp_path, suffix):
 def test_signal_during_animate_leaves_nothing(tmp_path, sig):
     out = tmp_path / "out.usda"
     env = dict(os.environ, HF_HUB_OFFLINE="1")
-    proc = subprocess.Popen([sys.executable, "-m", "facegen", "animate", str(EXAMPLE), "--no-text", "-o", str(out)],
+    proc = subprocess.Popen([sys.executable, "-m", "facegen", "animate", str(EXAMPLE), "--no-text", "-o",
+                             str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=ROOT)
     deadline = time.monotonic() + 300
     while not any(p.name.startswith(".out.") for p in tmp_path.iterdir()) and proc.poll() is None:
@@ -165,9 +168,11 @@ def test_alignment_with_impossible_word_rate_refused(tmp_path, kind):
     if kind == "json":
         import json
 
-        path.write_text(json.dumps([{"word": "la", "start": i * 0.002, "end": i * 0.002 + 0.001} for i in range(n)]))
+        path.write_text(json.dumps([{"word": "la", "start": i * 0.002, "end": i * 0.002 + 0.001}
+                                    for i in range(n)]))
     else:
-        path.write_text("word,start,end\n" + "".join(f"la,{i * 0.002:.4f},{i * 0.002 + 0.001:.4f}\n" for i in range(n)))
+        path.write_text("word,start,end\n" + "".join(f"la,{i * 0.002:.4f},{i * 0.002 + 0.001:.4f}\n"
+                                                     for i in range(n)))
     with pytest.raises(FacegenError, match="2000 words for 4.4 s of audio"):
         read_alignment(path, duration=4.4)
     assert len(read_alignment(path, duration=400.0)) == n
@@ -205,6 +210,7 @@ def test_outputs_follow_the_umask_even_when_the_writer_makes_0600_files(tmp_path
 def test_overlong_output_name_is_one_line(tmp_path):
     with pytest.raises(FacegenError, match="bytes long; this file system allows"):
         atomic.check_writable(tmp_path / ("a" * 300 + ".usdc"))
-    with atomic.atomic_path(tmp_path / ("b" * 240 + ".npy")) as tmp:  # the longest names still get a temporary
+    # the longest names still get a temporary
+    with atomic.atomic_path(tmp_path / ("b" * 240 + ".npy")) as tmp:
         np.save(tmp, np.zeros(1))
     assert (tmp_path / ("b" * 240 + ".npy")).is_file()

@@ -300,8 +300,10 @@ def test_expression_classes_and_lexicon_choice():
 
 def test_upper_face_ignores_the_phones():
     words = [Wd("wow", 0.1, 0.4), Wd("really", 0.4, 0.8)]
-    a = motion_curves(_phones(("w", 0.1, 0.2), ("'aU", 0.2, 0.4)), words, 30, FPS, rng=np.random.default_rng(1))
-    b = motion_curves(_phones(("m", 0.1, 0.3), ("'i:", 0.3, 0.5)), words, 30, FPS, rng=np.random.default_rng(1))
+    a = motion_curves(_phones(("w", 0.1, 0.2), ("'aU", 0.2, 0.4)), words, 30, FPS,
+                      rng=np.random.default_rng(1))
+    b = motion_curves(_phones(("m", 0.1, 0.3), ("'i:", 0.3, 0.5)), words, 30, FPS,
+                      rng=np.random.default_rng(1))
     assert a.shape == (30, len(CHANNELS))
     upper = [CHANNELS.index(c) for c in UPPER_CHANNELS + ("blink",)]
     assert np.array_equal(a[:, upper], b[:, upper])

@@ -21,7 +21,8 @@ def test_cmu_phones_map_to_the_same_visemes_as_espeak():
     assert phone_visemes("AY1", "cmu") == phone_visemes("aI") == ("AA", "IH")
     assert phone_visemes("SH", "cmu") == phone_visemes("S") == ("SH",)  # espeak's S is CMU's SH
     assert phone_visemes("SIL", "cmu") == ("rest",)
-    assert phone_stress("AA1", "cmu") == 1.0 and phone_stress("AH0", "cmu") == 0.0 and phone_stress("'a") == 1.0
+    assert phone_stress("AA1", "cmu") == 1.0 and phone_stress("AH0",
+                                                              "cmu") == 0.0 and phone_stress("'a") == 1.0
     with pytest.raises(FacegenError, match="alphabet"):
         viseme_curves(CMU, 25, alphabet="ipa")
 

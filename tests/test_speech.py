@@ -121,7 +121,8 @@ def test_rate_pitch_and_variant_change_the_voice():
     slow = synthesize("A short sentence to time.", rate=110)
     fast = synthesize("A short sentence to time.", rate=260)
     assert slow.duration > 1.6 * fast.duration
-    low = synthesize("Aaaah.", voice="en-us+m3", pitch=20)  # at 10, F0 sinks to ~50 Hz and creaks: few voiced frames
+    # at 10, F0 sinks to ~50 Hz and creaks: few voiced frames
+    low = synthesize("Aaaah.", voice="en-us+m3", pitch=20)
     high = synthesize("Aaaah.", voice="en-us+f3", pitch=90)
     assert pitch_hz(high) > 1.5 * pitch_hz(low)
 

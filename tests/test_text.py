@@ -158,7 +158,8 @@ def test_minilm_vectors(minilm):
     # "Unbelievable!" is [unbelievable] [!]: its vector is the mean of two token states, not either one
     tokens = minilm.tokenize(" ".join(words))
     assert [minilm.tokenize.tokenizer.id_to_token(i) for i in tokens.ids[5:7]] == ["unbelievable", "!"]
-    assert tokens.special.tolist() == [True] + [False] * 7 + [True]  # [CLS] hello , world . unbelievable ! ok [SEP]
+    # [CLS] hello , world . unbelievable ! ok [SEP]
+    assert tokens.special.tolist() == [True] + [False] * 7 + [True]
     states = hidden(minilm, tokens.ids.tolist())
     np.testing.assert_allclose(vecs[2], states[5:7].mean(axis=0), atol=1e-5)
     np.testing.assert_allclose(vecs[0], states[1:3].mean(axis=0), atol=1e-5)
@@ -206,8 +207,10 @@ def test_minilm_word_vectors_equal_the_transformers_backend(minilm):
     through_transformers = load_text_backend(_minilm_folder())
     assert isinstance(minilm.forward, MiniLM) and not isinstance(through_transformers.forward, MiniLM)
     assert through_transformers.dim == 384 and through_transformers.max_tokens == minilm.max_tokens == 512
-    words = ["The", "quick", "brown", "fox,", "amazed,", "jumped", "over", "3", "lazy", "dogs'", "résumés!"] * 3
-    np.testing.assert_allclose(minilm.word_vectors(words), through_transformers.word_vectors(words), atol=1e-5)
+    words = ["The", "quick", "brown", "fox,", "amazed,", "jumped", "over", "3", "lazy", "dogs'",
+             "résumés!"] * 3
+    np.testing.assert_allclose(minilm.word_vectors(words), through_transformers.word_vectors(words),
+                               atol=1e-5)
 
 
 def test_minilm_loads_without_transformers():

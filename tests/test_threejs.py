@@ -28,7 +28,8 @@ FPS = 25
 FRAMES = 40
 
 # the avatar's meshes and morph targets: several naming styles, a target not ARKit's, jawOpen on both meshes
-MESHES = {"Head": ["jawOpen", "blendShape1.eyeBlinkLeft", "eyeBlink_R", "ARKit_mouthSmile_L", "MouthSmileRight",
+MESHES = {"Head": ["jawOpen", "blendShape1.eyeBlinkLeft", "eyeBlink_R", "ARKit_mouthSmile_L",
+                   "MouthSmileRight",
                    "Face:browInnerUp", "bs_cheekPuff", "wrinkle"],
           "Teeth": ["Wolf3D.jawOpen", "tongueOut"]}
 
@@ -73,7 +74,8 @@ def test_threejs_player_drives_arkit_named_morph_targets(node_folder):
     frames = [0, 1, 12.5, 13, FRAMES - 1]  # 12.5: halfway between two frames (linear)
     times = [f / FPS for f in frames]
     rule_names = [*ARKIT_NAMES, *MESHES["Head"], *MESHES["Teeth"], *LIVE_LINK_COLUMNS, "blendShape2.JawOpen",
-                  "ARKIT-eyeWide_L", "facs_mouthPress-R", "Head|browDown_L", "mouthClose.001", "Basis", "", "MOUTHFUNNEL", "EYEBLINK_L"]
+                  "ARKIT-eyeWide_L", "facs_mouthPress-R", "Head|browDown_L", "mouthClose.001", "Basis", "",
+                  "MOUTHFUNNEL", "EYEBLINK_L"]
     bad = [{"exportFps": FPS, "facsNames": ["a", "b"], "weightMat": [[0.1, 0.2]]},
            {"exportFps": FPS, "facsNames": ["jawOpen"], "weightMat": [[0.1, 0.2]]},
            {"facsNames": ["jawOpen"], "weightMat": [[0.1]]}]

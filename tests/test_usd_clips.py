@@ -121,11 +121,13 @@ def test_auto_threshold_and_never(tmp_path, grid_mesh, monkeypatch):
     monkeypatch.setattr(usd_clips, "CLIP_THRESHOLD", 20)
     monkeypatch.setattr(usd_clips, "CLIP_FRAMES", 8)
     short, long = make_animation(grid_mesh, frames=20), make_animation(grid_mesh, frames=21)
-    assert write_animation(short, tmp_path / "short.usdc") == [tmp_path / "short.usdc", tmp_path / "short.wav"]
+    assert write_animation(short, tmp_path / "short.usdc") == [tmp_path / "short.usdc",
+                                                               tmp_path / "short.wav"]
     written = write_animation(long, tmp_path / "long.usdc")
     assert [p.name for p in written[2:]] == ["long.rest.usdc", "long.manifest.usda", "long.0000.usdc",
                                              "long.0001.usdc", "long.0002.usdc"]
-    assert write_animation(long, tmp_path / "one.usdc", clips="never") == [tmp_path / "one.usdc", tmp_path / "one.wav"]
+    assert write_animation(long, tmp_path / "one.usdc", clips="never") == [tmp_path / "one.usdc",
+                                                                           tmp_path / "one.wav"]
     # blend shapes hold a few weights per frame: "auto" keeps them in one file
     assert len(write_animation(long, tmp_path / "bs.usdc", mode="blendshapes")) == 2
     for name in ("long", "one"):
@@ -141,8 +143,10 @@ def test_short_clips_keep_their_bytes(tmp_path, grid_mesh):
     for ext in (".usda", ".usdc"):
         for folder, options in (("auto", {}), ("never", {"clips": "never"}), ("stream", {"clips": "never"})):
             (tmp_path / folder).mkdir(exist_ok=True)
-            write_animation(streamed(anim) if folder == "stream" else anim, tmp_path / folder / f"a{ext}", **options)
-        assert len({(tmp_path / folder / f"a{ext}").read_bytes() for folder in ("auto", "never", "stream")}) == 1
+            write_animation(streamed(anim) if folder == "stream" else anim, tmp_path / folder / f"a{ext}",
+                            **options)
+        assert len({(tmp_path / folder / f"a{ext}").read_bytes() for folder in ("auto", "never",
+                                                                                "stream")}) == 1
     text = (tmp_path / "auto" / "a.usda").read_text()
     assert "clips" not in text and "subLayers" not in text
 
@@ -206,7 +210,8 @@ def test_usdz_packs_the_clips(tmp_path, grid_mesh):
     out = tmp_path / "clip.usdz"
     assert write_animation(anim, out, clips=PER_CLIP) == [out]
     assert listing(tmp_path) == ["clip.usdz"]
-    assert contents(out) == ["clip.usdc", *(f for f in sorted(CLIP_FILES[2:])), "clip.clips/clip.manifest.usda",
+    assert contents(out) == ["clip.usdc", *(f for f in sorted(CLIP_FILES[2:])),
+                             "clip.clips/clip.manifest.usda",
                              "clip.clips/clip.rest.usdc", "clip.wav"]
     back = read_animation(out)
     np.testing.assert_array_equal(back.vertices, anim.vertices)
@@ -234,7 +239,8 @@ def test_validate_finds_broken_clips(tmp_path, grid_mesh):
 
 def test_validate_reads_one_frame_at_a_time(tmp_path, grid_mesh, monkeypatch):
     """The validator never asks the stage for a list of every frame: it reads the samples through lazy
-    frames (PointsFrames), each once (its vertex count, extent, values), so a long clip is never held whole."""
+    frames (PointsFrames), each once (its vertex count, extent, values), so a long clip is never held
+    whole."""
     from facegen.exchange import usd
 
     out = tmp_path / "clip.usdc"
@@ -248,13 +254,16 @@ def test_validate_reads_one_frame_at_a_time(tmp_path, grid_mesh, monkeypatch):
 
 def test_cli_usd_clips_and_validate(tmp_path, grid_mesh):
     """`--usd-clips` is checked before any work; `facegen validate` follows the clips."""
-    done = subprocess.run([sys.executable, "-m", "facegen", "animate", str(tmp_path / "none.wav"), "--no-text",
-                           "-o", str(tmp_path / "x.usdc"), "--usd-clips", "0"], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-m", "facegen", "animate", str(tmp_path / "none.wav"),
+                           "--no-text",
+                           "-o", str(tmp_path / "x.usdc"), "--usd-clips", "0"], capture_output=True,
+                          text=True,
                           check=False)
     assert done.returncode == 2 and "auto, never or a positive number" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
     write_animation(make_animation(grid_mesh, frames=FRAMES), tmp_path / "clip.usdc", clips=PER_CLIP)
-    done = subprocess.run([sys.executable, "-m", "facegen", "validate", str(tmp_path / "clip.usdc"), "--json"],
+    done = subprocess.run([sys.executable, "-m", "facegen", "validate", str(tmp_path / "clip.usdc"),
+                           "--json"],
                           capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stdout + done.stderr
     checks = {c["name"]: c for c in json.loads(done.stdout)["checks"]}
@@ -283,12 +292,14 @@ def test_blender_plays_value_clips(tmp_path):
         positions[str(frame)] = str(tmp_path / f"frame{frame}.npy")
         np.save(positions[str(frame)], clip.vertices[frame].astype(np.float64))
     expect = {"vertices": clip.num_vertices, "frames": frames, "fps": clip.fps, "meters_per_unit": 0.2,
-              "tolerance": TOLERANCE * clip.size, "positions": positions, "sound_frames": frames, "packed": False}
+              "tolerance": TOLERANCE * clip.size, "positions": positions, "sound_frames": frames,
+              "packed": False}
     (tmp_path / "expect.json").write_text(json.dumps(expect))
     temp = tmp_path / "tmp"
     temp.mkdir()
     done = subprocess.run([str(BLENDER_PYTHON), str(TESTS / "blender_check.py"), str(path), "--expect-json",
-                           str(tmp_path / "expect.json")], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                           str(tmp_path / "expect.json")], capture_output=True, text=True, timeout=300,
+                          cwd=tmp_path,
                           check=False, env={**os.environ, "TMPDIR": str(temp)})
     lines = [line for line in done.stdout.splitlines() if line.startswith("blender_check: ")]
     assert lines, f"blender_check printed no result (exit {done.returncode}):\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"

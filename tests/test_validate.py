@@ -182,7 +182,8 @@ def test_time_samples_off_the_frame_grid(good_usda):
     value = Vt.Vec3fArray.FromNumpy(np.zeros((120, 3), np.float32))
     edit_layer(good_usda, lambda layer: layer.SetTimeSample(POINTS, 2.5, value))
     report = validate(good_usda)
-    assert "time samples" in failed(report) and "instead of 0, 1, ..., 50" in report.check("time samples").detail
+    assert "time samples" in failed(report) and "instead of 0, 1, ..., 50" in report.check("time "
+                                                                                           "samples").detail
 
 
 def test_stale_extent(good_usda):
@@ -199,7 +200,8 @@ def test_pxr_validators_fail_the_report(good_usda):
 
     edit_layer(good_usda, strip)
     report = validate(good_usda)
-    assert failed(report) == {"usd:usdValidation:StageMetadataChecker", "usd:usdGeomValidators:StageMetadataChecker"}
+    assert failed(report) == {"usd:usdValidation:StageMetadataChecker",
+                              "usd:usdGeomValidators:StageMetadataChecker"}
     assert "metersPerUnit" in report.check("usd:usdGeomValidators:StageMetadataChecker").detail
 
 

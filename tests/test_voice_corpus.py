@@ -1,5 +1,5 @@
-"""The multi-voice corpus: voices drawn apart from styles, a held-out synthesiser, augmented audio, compact rig
-curves that the dataset reader poses, phone timings whose p/b/m close the lips, resumable and refusing."""
+"""The multi-voice corpus: voices drawn apart from styles, a held-out synthesiser, augmented audio, compact
+rig curves that the dataset reader poses, phone timings whose p/b/m close the lips, resumable and refusing."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
 """facegen.synth.voices: every installed Flite and Festival voice says a sentence with its own phone and word
-timings; rate control; the errors a user meets (engine or voice not installed, unknown voice, nothing to say)."""
+timings; rate control; the errors a user meets (engine or voice not installed, unknown voice, nothing to
+say)."""
 
 from __future__ import annotations
 
@@ -54,7 +55,8 @@ def test_voice_says_a_sentence_with_its_timings(name):
         from facegen.phonetics import espeak_to_cmu
 
         said = espeak_to_cmu(said)
-        assert len(said) == len(PHONES) and sum(a != b for a, b in zip(said, PHONES, strict=True)) <= 1  # accents
+        # accents
+        assert len(said) == len(PHONES) and sum(a != b for a, b in zip(said, PHONES, strict=True)) <= 1
     else:
         assert said == PHONES  # the engine's own phones, mapped to CMU
     starts, ends = np.array([s for _, s, _ in utt.phones]), np.array([e for _, _, e in utt.phones])
