@@ -45,8 +45,10 @@ def run_once(tree: Path, wav: Path, txt: Path, out: Path) -> dict:
     # those overlap
     stages["other"] = wall - sum(v for k, v in stages.items() if not k.endswith("_in_parallel"))
     said = [line for line in proc.stderr.splitlines() if not line.startswith("{")]
-    for written in {out, out.with_suffix(".wav")} - {wav}:  # 430 MB a minute of points: left behind, the dirty
-        written.unlink(missing_ok=True)  # pages of a dozen runs make the kernel throttle the later runs' writing
+    # 430 MB a minute of points: left behind, the dirty pages of a dozen runs make the kernel throttle the
+    # later runs' writing
+    for written in {out, out.with_suffix(".wav")} - {wav}:
+        written.unlink(missing_ok=True)
     return {"wall": wall, "stages": stages, "heavy": profile.get("heavy_modules", []), "said": said}
 
 

@@ -10,7 +10,8 @@ fused Adam).
 
     python benchmarks/bench_train.py                 # 1 warm-up step, then 1 timed epoch on 2 threads
     python benchmarks/bench_train.py --epochs 2 --threads 1 --modalities audio
-    python benchmarks/bench_train.py --pca 64 --sequences 2000   # the shipped model's setting: <= 3 min / epoch
+    python benchmarks/bench_train.py --pca 64 --sequences 2000
+        # the shipped model's setting: <= 3 min / epoch
 
 Prints seconds per epoch and sequences per second (target: <= 60 s per epoch on 2 CPU cores), the CPU
 time the epoch used, the time to write one checkpoint, and the load average before and after: on a

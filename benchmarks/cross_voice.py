@@ -14,7 +14,8 @@ closure, crossed lips, rest aperture (mm, non-speech frames), unseen-word upper-
 aperture on 5 s of pure noise animated with --no-text (the mouth should stay at rest: < 1.5 mm). Prints a
 Markdown table and writes it with the raw numbers to --json.
 
-    python benchmarks/cross_voice.py CORPUS BUNDLE [BUNDLE ...] [--name A --name B] [--limit 80] [--json out.json]
+    python benchmarks/cross_voice.py CORPUS BUNDLE [BUNDLE ...] [--name A --name B] [--limit 80]
+                                     [--json out.json]
 """
 
 from __future__ import annotations
@@ -117,9 +118,10 @@ def row(name: str, sets: dict, unseen: dict, noise_mm: float) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
-HEADER = ("| model | A: LVE ×1e-4 | A: upper err | A: aperture r | A: ratio | A: p/b/m closed | A: crossed | "
-          "A: rest mm | X: LVE ×1e-4 | X: upper err | X: aperture r | X: ratio | X: p/b/m closed | X: crossed | "
-          "X: rest mm | unseen-word response | noise: aperture mm |\n|" + "---|" * 17)
+HEADER = ("| model | A: LVE ×1e-4 | A: upper err | A: aperture r | A: ratio | A: p/b/m closed | "
+          "A: crossed | A: rest mm | X: LVE ×1e-4 | X: upper err | X: aperture r | X: ratio | "
+          "X: p/b/m closed | X: crossed | X: rest mm | unseen-word response | noise: aperture mm |\n|"
+          + "---|" * 17)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -247,7 +247,8 @@ def import_profile() -> list[tuple[str, float]]:
                   key=lambda r: -r[1])
     heavy = sorted(k for k in packages if k in ("librosa", "numba", "transformers", "pxr", "scipy",
                                                 "sklearn"))
-    return rows[:5] + [(f"(imported among them: {', '.join(heavy) or 'none of librosa, numba, transformers, pxr'})",
+    return rows[:5] + [(("(imported among them: "
+                         f"{', '.join(heavy) or 'none of librosa, numba, transformers, pxr'})"),
                         0.0)]
 
 
@@ -450,7 +451,8 @@ def report(r: dict) -> str:
               "import, the file); exit = the rest of the wall time (interpreter teardown of "
               "torch/transformers modules)."), "",
               f"`facegen --help`: {r['help']['median']:.2f} s (median of runs).", "",
-              "Slowest imports at start-up (`python -X importtime -c 'import facegen.cli, facegen.animator'`): "
+              "Slowest imports at start-up "
+              "(`python -X importtime -c 'import facegen.cli, facegen.animator'`): "
               + ", ".join(f"{n} {s:.2f} s" if s else n for n, s in r["imports"]) + ".", ""]
     lines += ["## Model forward vs. a FaceFormer-class encoder (this process, best of runs, seconds)", "",
               ("Ours = the whole network: encoders, fusion, BiLSTMs and every output frame (template + "

@@ -323,7 +323,8 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
             last = p == len(spans) - 1
             cut = spans[p][1]
             stop = n_frames if last else min(n_frames, cut + LOOKAHEAD)
-            back = 1 if words else 0  # the piece before's last word, aligned again: LOOKBEHIND in align_pieces
+            # the piece before's last word, aligned again: LOOKBEHIND in align_pieces
+            back = 1 if words else 0
             origin = max(0, words[-1][1] - LOOKBEHIND) if words else 0  # the first frame of its search
             part = pcm[origin * HOP * 2:stop * HOP * 2]
             found = _align_piece(part, [t for _, t in spoken[len(words) - back:]], stop - origin,

@@ -16,7 +16,8 @@ from facegen.align_ahead import AlignAhead, Aligned
 from facegen.errors import FacegenError
 from facegen.runtime import Say, silent
 
-FORCED, FILE, RECOGNISED, NONE = "forced alignment", "alignment file", "speech recognition", "none (--no-text)"
+FORCED, FILE, RECOGNISED, NONE = ("forced alignment", "alignment file", "speech recognition",
+                                  "none (--no-text)")
 
 
 def force_aligned(text: str | None, alignment, no_text: bool) -> bool:

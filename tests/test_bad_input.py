@@ -109,4 +109,5 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(case, inputs, tmp_path,
     assert len(problems) == 1 and "internal error" not in err, err
     assert list(out.iterdir()) == [], "something was written"
     assert sorted(p.name for p in inputs.iterdir()) == before
-    assert (inputs / "x.usda").read_text() == "#usda 1.0\n" and (inputs / "clip.txt").read_bytes() == TXT.read_bytes()
+    assert ((inputs / "x.usda").read_text() == "#usda 1.0\n"
+            and (inputs / "clip.txt").read_bytes() == TXT.read_bytes())

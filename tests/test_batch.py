@@ -70,8 +70,10 @@ def test_manifest_errors_name_their_line(tmp_path):
         "audio,output\na.wav,a.npy\n\nb.wav,b.fbx\n": "line 4: cannot handle 'b.fbx'",
         "audio,text,alignment\na.wav,hi,a.json\n": "line 2: give one of text, text_file or alignment",
         "audio,output\n,a.npy\n": "line 2: no audio file given",
-        '[\n {"audio": "a.wav"},\n\n {"audio": "b.wav", "output": "b.xyz"}\n]': "line 4: cannot handle 'b.xyz'",
-        '{"name": "x",\n "jobs": [{"audio": "a.wav"},\n  {"output": "b.npy"}]}': "line 3: no audio file given",
+        '[\n {"audio": "a.wav"},\n\n {"audio": "b.wav", "output": "b.xyz"}\n]':
+            "line 4: cannot handle 'b.xyz'",
+        '{"name": "x",\n "jobs": [{"audio": "a.wav"},\n  {"output": "b.npy"}]}':
+            "line 3: no audio file given",
         '{"audio": "a.wav"}\n{"audio": "b.wav", "output": "b.npy"}\n{"audio": \n': "line 3: not valid JSON",
         '[{"audio": "a.wav"},\n {"audio": "b.wav",}]': "line 2: not valid JSON",
         '[{"audio": "a.wav"},\n ["b.wav"]]': "line 2: expected an object",

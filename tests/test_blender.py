@@ -80,7 +80,8 @@ def run_check(blender_python: Path, args: list[str], tmp_path: Path, env: dict |
                           timeout=300,
                           cwd=tmp_path, check=False, env={**os.environ, "TMPDIR": str(temp), **(env or {})})
     lines = [line for line in done.stdout.splitlines() if line.startswith("blender_check: ")]
-    assert lines, f"blender_check printed no result (exit {done.returncode}):\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+    assert lines, (f"blender_check printed no result (exit {done.returncode}):\n{done.stdout[-3000:]}\n"
+                   f"{done.stderr[-3000:]}")
     result = json.loads(lines[-1].removeprefix("blender_check: "))
     result["returncode"] = done.returncode
     result["left_behind"] = sorted(p.name for p in temp.glob("facegen_audio_*"))
@@ -183,7 +184,8 @@ def test_read_weights_json_and_csv(tmp_path):
     np.testing.assert_array_equal(clip["frames"], np.arange(70))
     write_wav(np.zeros(16000, np.float32), 16000, tmp_path / "b.wav")
     clip = facegen_arkit.read_weights(write_live_link(tmp_path / "b.csv", weights, 30))
-    assert sorted(clip["names"]) == sorted(ARKIT_NAMES) and clip["fps"] == 30 and clip["audio"] == str(tmp_path / "b.wav")
+    assert (sorted(clip["names"]) == sorted(ARKIT_NAMES) and clip["fps"] == 30
+            and clip["audio"] == str(tmp_path / "b.wav"))
     by_name = [clip["names"].index(n) for n in ARKIT_NAMES]  # the CSV's order: JawRight before JawLeft, ...
     np.testing.assert_allclose(clip["weights"][:, by_name], weights, atol=1e-6)
     np.testing.assert_array_equal(clip["frames"], np.arange(70))  # the ".mmm" of whole-frame rows is ignored

@@ -119,7 +119,8 @@ def test_glb_layout(clip, tmp_path):
     assert out.read_bytes()[:4] == b"glTF"
     doc = _doc(out)
     info = doc.asset.extras["facegen"]
-    assert info["fps"] == 25.0 and info["frames"] == clip.num_frames and info["tolerance"] == pca.DEFAULT_TOLERANCE
+    assert (info["fps"] == 25.0 and info["frames"] == clip.num_frames
+            and info["tolerance"] == pca.DEFAULT_TOLERANCE)
     assert 0 < info["reconstructionError"] <= pca.DEFAULT_TOLERANCE
     assert info["metadata"] == {"speaker": "test", "seed": 0}
     mesh = doc.meshes[0]

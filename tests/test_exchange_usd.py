@@ -88,7 +88,8 @@ def test_usd_file_contents(tmp_path, grid_mesh, ext):
     data = layer.customLayerData["facegen"]
     assert data["version"] == __version__ and data["fps"] == FPS and data["frames"] == 50
     meta = data["metadata"]
-    assert meta["model"] == "unit-test.safetensors" and meta["frames"] == 50 and list(meta["tags"]) == ["a", "b"]
+    assert (meta["model"] == "unit-test.safetensors" and meta["frames"] == 50
+            and list(meta["tags"]) == ["a", "b"])
     assert "gone" not in meta and '"word": "hi"' in meta["words"]
 
 
@@ -107,7 +108,8 @@ def test_uvs_display_colour_and_skin_material(tmp_path, grid_mesh, name, mode):
     stage = Usd.Stage.Open(str(out))
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
     st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
-    assert st.GetTypeName() == Sdf.ValueTypeNames.TexCoord2fArray and st.GetInterpolation() == UsdGeom.Tokens.vertex
+    assert (st.GetTypeName() == Sdf.ValueTypeNames.TexCoord2fArray
+            and st.GetInterpolation() == UsdGeom.Tokens.vertex)
     uv = np.asarray(st.Get(), np.float32)
     assert uv.shape == (grid_mesh.num_vertices, 2) and uv.min() == 0.0 and uv.max() == 1.0
     assert np.array_equal(uv, face_uvs(grid_mesh.vertices))
@@ -122,7 +124,8 @@ def test_uvs_display_colour_and_skin_material(tmp_path, grid_mesh, name, mode):
     shader = material.ComputeSurfaceSource()[0]
     assert shader.GetIdAttr().Get() == "UsdPreviewSurface"
     assert np.allclose(shader.GetInput("diffuseColor").Get(), SKIN_COLOR)
-    assert shader.GetInput("metallic").Get() == 0.0 and shader.GetInput("roughness").Get() == pytest.approx(0.6)
+    assert (shader.GetInput("metallic").Get() == 0.0
+            and shader.GetInput("roughness").Get() == pytest.approx(0.6))
     report = validate(out)
     assert report.ok and "no findings" in report.check("usd validators").detail, report.to_text()
 

@@ -157,7 +157,8 @@ MEMORY_SCRIPT = textwrap.dedent("""
     frames = predict_frames(bundle, mel, text, 0, template=face.vertices)
     V = face.num_vertices
     with open(sys.argv[2], "wb") as f:  # .npy [T, 3V] written block by block
-        np.lib.format.write_array_header_1_0(f, {{"descr": "<f4", "fortran_order": False, "shape": (T, 3 * V)}})
+        np.lib.format.write_array_header_1_0(f, {{"descr": "<f4", "fortran_order": False, """
+                                             """"shape": (T, 3 * V)}})
         for _, block in frames.blocks():
             f.write(block.tobytes())
     print(json.dumps({{"before_mb": before, "peak_mb": peak_mb(),

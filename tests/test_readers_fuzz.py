@@ -46,7 +46,8 @@ def _animation(path: Path):
     return read_animation(path, template=template)
 
 
-NPY_HEADER = b"\x93NUMPY\x01\x00v\x00{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4, 3), }" + b" " * 50 + b"\n"
+NPY_HEADER = (b"\x93NUMPY\x01\x00v\x00{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4, 3), }"
+              + b" " * 50 + b"\n")
 ANIMATIONS = {
     ".npy": st.one_of(_noise(), _noise(NPY_HEADER[:128])),
     ".glb": st.one_of(_noise(), _noise(b"glTF\x02\x00\x00\x00")),

@@ -188,7 +188,8 @@ def test_phoneme_to_viseme_mapping():
     assert phone_visemes("3:") == ("ER",)
     # an espeak phoneme looks like its CMU phones (one table: facegen.phonetics), e.g. "a" in "cat" like AE
     assert phone_visemes("'a") == phone_visemes("AE1", "cmu") == ("AE",) and phone_visemes("V") == ("AH",)
-    assert phone_visemes("_:") == ("rest",) and phone_visemes("qq") == ("rest",) and phone_visemes("") == ("rest",)
+    assert (phone_visemes("_:") == ("rest",) and phone_visemes("qq") == ("rest",)
+            and phone_visemes("") == ("rest",))
     english = ["p", "b", "m", "f", "v", "T", "D", "s", "z", "S", "Z", "tS", "dZ", "t", "d", "n", "l", "r",
                "k", "g", "N", "h", "w", "j", "a", "A:", "e", "E", "@", "3:", "i:", "I", "O:", "U", "u:", "aI",
                "aU", "eI", "oU", "OI", "0", "V", "@2", "@L", "t#", "a#", "i@3", "O2", "aI@", "e@", "i@", "U@",
@@ -243,7 +244,8 @@ def test_speaker_style_changes_amplitude():
     assert SpeakerStyle.for_speaker(2) == SpeakerStyle.for_speaker(2) != SpeakerStyle.for_speaker(3)
     for i in range(14):
         s = SpeakerStyle.for_speaker(i)
-        assert 0.1 <= s.onset <= 0.2 and 0.6 <= s.decay <= 1.0 and 2.0 <= s.blink_interval[0] < s.blink_interval[1] <= 6.0
+        assert (0.1 <= s.onset <= 0.2 and 0.6 <= s.decay <= 1.0
+                and 2.0 <= s.blink_interval[0] < s.blink_interval[1] <= 6.0)
 
 
 def test_visemes_from_real_speech():

@@ -62,7 +62,8 @@ def run_check(folder: Path, spec: dict) -> dict:
     done = subprocess.run(["node", CHECK.name, "spec.json"], cwd=folder, capture_output=True, text=True,
                           timeout=120, check=False)
     lines = [line for line in done.stdout.splitlines() if line.startswith("threejs_check: ")]
-    assert done.returncode == 0 and lines, f"node failed (exit {done.returncode}):\n{done.stdout}\n{done.stderr}"
+    assert done.returncode == 0 and lines, (f"node failed (exit {done.returncode}):\n{done.stdout}\n"
+                                            f"{done.stderr}")
     return json.loads(lines[-1].removeprefix("threejs_check: "))
 
 

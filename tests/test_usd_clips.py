@@ -68,7 +68,8 @@ def test_value_clip_files_and_what_usd_composes(tmp_path, grid_mesh, ext):
     out = tmp_path / f"clip{ext}"
     written = write_animation(stream, out, clips=PER_CLIP)
     assert written == [out, tmp_path / "clip.wav", *(tmp_path / f for f in CLIP_FILES)]
-    assert listing(tmp_path) == sorted([f"clip{ext}", "clip.wav", "clip.clips", *CLIP_FILES])  # no temporaries
+    # no temporaries
+    assert listing(tmp_path) == sorted([f"clip{ext}", "clip.wav", "clip.clips", *CLIP_FILES])
     assert stream.vertices.given == FRAMES  # each frame computed once
 
     # each clip layer holds exactly its frames' points and extents, at the stage's own time codes
@@ -93,7 +94,8 @@ def test_value_clip_files_and_what_usd_composes(tmp_path, grid_mesh, ext):
     assert [a.path for a in clips["assetPaths"]] == [f"./clip.clips/clip.{k:04d}.usdc" for k in range(4)]
     assert [tuple(a) for a in clips["active"]] == [(0, 0), (16, 1), (32, 2), (48, 3)]
     assert [tuple(t) for t in clips["times"]] == [(0, 0), (49, 49)]
-    assert clips["primPath"] == "/Face/Mesh" and clips["manifestAssetPath"].path == "./clip.clips/clip.manifest.usda"
+    assert (clips["primPath"] == "/Face/Mesh"
+            and clips["manifestAssetPath"].path == "./clip.clips/clip.manifest.usda")
 
     # composed: one animation, one sample per frame, exact values across the clip boundaries
     points, extent = mesh.GetPointsAttr(), mesh.GetExtentAttr()
@@ -302,7 +304,8 @@ def test_blender_plays_value_clips(tmp_path):
                           cwd=tmp_path,
                           check=False, env={**os.environ, "TMPDIR": str(temp)})
     lines = [line for line in done.stdout.splitlines() if line.startswith("blender_check: ")]
-    assert lines, f"blender_check printed no result (exit {done.returncode}):\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+    assert lines, (f"blender_check printed no result (exit {done.returncode}):\n{done.stdout[-3000:]}\n"
+                   f"{done.stderr[-3000:]}")
     result = json.loads(lines[-1].removeprefix("blender_check: "))
     assert done.returncode == 0
     failed = {name: c["detail"] for name, c in result["checks"].items() if not c["ok"]}

@@ -60,7 +60,8 @@ def test_sequences_are_complete_and_consistent(corpus):
         assert [w["word"] for w in align["words"]] == [t.strip(".,!?;:") for t in text]
         assert align["words"][-1]["end"] <= len(audio) / rate + 0.05
         meta = json.loads((out / "meta" / f"{name}.json").read_text())
-        assert meta["voice"] == entry["voice"] and (meta["voice"].startswith("flite:") == entry["split"].endswith("xvoice"))
+        assert meta["voice"] == entry["voice"] and (meta["voice"].startswith("flite:")
+                                                    == entry["split"].endswith("xvoice"))
 
 
 def test_the_reader_poses_the_curves_and_bilabials_close_the_lips(corpus):

@@ -4,7 +4,8 @@ face.
 For frame offsets d_t (the frame minus the template) and shape offsets S ([3V, 52], `Shapes.offsets`), the
 weights W ([T, 52]) minimise
 
-    sum_t ||S w_t - d_t||^2 / V  +  smoothness * sum_t ||w_t - w_{t-1}||^2  +  ridge * sum_t sum_k ||S_k||^2 w_tk^2 / V
+    sum_t ||S w_t - d_t||^2 / V  +  smoothness * sum_t ||w_t - w_{t-1}||^2
+        +  ridge * sum_t sum_k ||S_k||^2 w_tk^2 / V
 
 subject to 0 <= W <= 1 (the data term in mm^2 per vertex, so `smoothness` means the same on any mesh scale or
 vertex count). The small ridge, relative to each shape's own size, decides where shapes cancel each other

@@ -5,7 +5,7 @@ Reading needs numpy only; `key_shapes` needs bpy. Like facegen_import.py this fi
 facegen (Blender's Python does not have it): it loads ARKit's 52 names and their name rule (`arkit_name`) from
 the file facegen/arkit/names.py itself, which the add-on zip carries beside it.
 
-    clip = read_weights("out.json")          # or out.csv; {"names", "weights" [T, N], "frames" [T], "fps", ...}
+    clip = read_weights("out.json")  # or out.csv; {"names", "weights" [T, N], "frames" [T], "fps", ...}
     done = key_shapes([bpy.data.objects["Face"]], clip)   # {"matched": {...}, "unmatched": [...]}
 
 Keys are written a whole F-curve at a time (keyframe_points.add + foreach_set), LINEAR between frames,
@@ -83,7 +83,8 @@ def _columns(path: Path, names: list[str]) -> tuple[list[str], list[int]]:
 
 
 def _read_json(path: Path, fps: float | None) -> dict:
-    shape = f"{path.name}: not an Audio2Face blend-shape JSON (exportFps, facsNames, weightMat [frames][shapes])"
+    shape = (f"{path.name}: not an Audio2Face blend-shape JSON "
+             "(exportFps, facsNames, weightMat [frames][shapes])")
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -31,7 +31,8 @@ from facegen.face.mesh import Mesh, vertex_normals
 
 RIGS = ("pca", "arkit")
 REST_SHAPE = "rest"
-_NORMAL_PRIOR = 1e-3  # ridge weight (share of the mean weight energy) pulling a normal delta to its shape's own
+# ridge weight (share of the mean weight energy) pulling a normal delta to its shape's own
+_NORMAL_PRIOR = 1e-3
 _NORMAL_BLOCK = 64  # frames whose normals are computed at once
 NORMAL_EPSILON = 1e-2  # shorter normal offsets (under 0.6 degrees at weight 1) are stored as exactly zero
 

@@ -162,8 +162,8 @@ _SIGHTS = """the view from the top of the tower|wjfs; the storm over the bay|fws
     the moon over the harbour|wjf; the old graveyard behind the church|fd; the lighthouse in the storm|fw;
     the harbour full of boats|jw; the burnt woods above the town|df; the rubbish dumped by the river|ad;
     the litter all over the beach|ad; the graffiti on the old church|ads"""
-_VANTAGES = """the bus window; the bridge; our hotel room; the top floor; the ferry; the back of the boat; the plane;
-    the footpath; the upper deck; the hilltop"""
+_VANTAGES = ("the bus window; the bridge; our hotel room; the top floor; the ferry; the back of the boat; "
+             "the plane;\n    the footpath; the upper deck; the hilltop")
 _DURATIONS = "for days; for weeks; all evening; for the whole weekend; all the way home; for a month"
 _PARTS = "day; evening; week; morning; afternoon; weekend; journey"
 _ERRANDS = """buy bread and milk; post a parcel to Vienna; return two books; pick up the photos; book a table
@@ -172,9 +172,11 @@ _ERRANDS = """buy bread and milk; post a parcel to Vienna; return two books; pic
     cleaner; buy a birthday present for Bob; fetch the big blue umbrella; pick up some envelopes; borrow a
     power drill; wash the van; water the tomato plants; book the ferry tickets; buy a new pump for the pool;
     fix the broken bike lamp; renew the bus pass; move the piano upstairs"""
-_DEADLINES = "Friday; the end of the month; lunch; the meeting; we leave for Madrid; the shops close; the weekend"
+_DEADLINES = ("Friday; the end of the month; lunch; the meeting; we leave for Madrid; the shops close; "
+              "the weekend")
 _LATER = "tomorrow morning; on Monday; next week; after lunch; before the weekend; on the way home; tonight"
-_CITIES = "Munich; Vienna; Boston; Oporto; Paris; Mumbai; Melbourne; Warsaw; Bologna; Moscow; Toulouse; Bilbao"
+_CITIES = ("Munich; Vienna; Boston; Oporto; Paris; Mumbai; Melbourne; Warsaw; Bologna; Moscow; Toulouse; "
+           "Bilbao")
 _PERIODS = "two months; a summer; five years; most of the winter; a week; a few days; half a year"
 # neutral words of each role: the fillers of neutral sentences and of the held-out sentences' twins
 _NEUTRAL = {"experiencer": ["calm", "busy", "hungry", "sleepy", "polite", "patient", "awake", "serious"],

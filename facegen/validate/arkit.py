@@ -78,8 +78,8 @@ def _check_json(report: Report, path: Path, expected: Expected) -> tuple[int | N
         width = len(names) if isinstance(names, list) else len(ARKIT_NAMES)
         bad = next((i for i, r in enumerate(rows or []) if len(r) != poses), None)
         ok = _is_number(poses) and poses == width == len(ARKIT_NAMES) and bad is None
-        detail = f"numPoses {poses!r}, {width} names" + (f"; weightMat row {bad} holds {len(rows[bad])} weights"
-                                                          if bad is not None else "")
+        detail = f"numPoses {poses!r}, {width} names" + (
+            f"; weightMat row {bad} holds {len(rows[bad])} weights" if bad is not None else "")
         report.add("pose count", ok, detail + ("" if ok else f" (ARKit has {len(ARKIT_NAMES)})"))
     fps = doc.get("exportFps")
     fps_ok = _is_number(fps) and math.isfinite(fps) and fps > 0

@@ -91,7 +91,8 @@ class ValueScan:
             diff = f - self.rest
             with np.errstate(invalid="ignore", over="ignore"):
                 np.multiply(diff, diff, out=diff)
-                d2 = diff[:, 0] + diff[:, 1] + diff[:, 2]  # squared offsets (3x faster than einsum, 10x than sum(1))
+                # squared offsets (3x faster than einsum, 10x than sum(1))
+                d2 = diff[:, 0] + diff[:, 1] + diff[:, 2]
             if not finite:  # NaN/inf: the "finite" check's failure, left out here
                 d2 = d2[np.isfinite(d2)]
             d = float(np.sqrt(d2.max(initial=0.0)))

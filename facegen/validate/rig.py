@@ -27,7 +27,8 @@ def check_rig(report: Report, names: list[str], lip_error_mm=None, face_error_mm
     errors = "; ".join(f"{what} {value:.3g} mm" for what, value in (("lip error", lip_error_mm),
                                                                     ("face error", face_error_mm))
                        if isinstance(value, int | float))
-    detail = (f"ARKit: {len(found)} of {len(ARKIT_NAMES)} shapes ({', '.join(sorted(found, key=ARKIT_NAMES.index))})"
+    detail = (f"ARKit: {len(found)} of {len(ARKIT_NAMES)} shapes "
+              f"({', '.join(sorted(found, key=ARKIT_NAMES.index))})"
               + (f"; missing {_listed(missing)}" if missing else "")
               + (f"; the fit's mean {errors}" if errors else ""))
     report.add("rig", not missing, detail, "warning")
