@@ -26,7 +26,8 @@ import time
 from dataclasses import dataclass
 
 from facegen.errors import FacegenError
-from facegen.runtime import PROFILE, cores, start_process
+from facegen.processes import start_process
+from facegen.runtime import PROFILE, cores
 
 
 @dataclass

@@ -20,7 +20,8 @@ from facegen.align_ahead import align_file
 from facegen.batch import Job, JobResult, run_batch
 from facegen.errors import FacegenError
 from facegen.exchange.formats import USD_LIBRARIES
-from facegen.runtime import ProcessPool, cores, process_pool, set_threads
+from facegen.processes import ProcessPool, process_pool
+from facegen.runtime import cores, set_threads
 
 ENGINES = ("local", "ray")
 # What the local engine's worker processes import before they are forked (once, not in every worker): torch,

@@ -1,5 +1,5 @@
 """The batch workers' preload: the local batch engine's forkserver imports this module once (engines.PRELOAD,
-runtime.process_pool's `preload`) before it forks the workers, so that every worker starts with the forced
+processes.process_pool's `preload`) before it forks the workers, so that every worker starts with the forced
 aligner's pocketsphinx decoders built (`align.warm()`) instead of building its own. Importing it is its one
 effect — a forkserver's preload can only import modules — and nothing else imports it."""
 

@@ -20,7 +20,8 @@ from facegen.datasets.splits import parse_subjects, sequence_name
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, read_mesh, read_region, surface_area, unit_area
 from facegen.face.regions import COMMUNITY_FILES
-from facegen.runtime import Say, progress_bar, run_tool, silent, warn_stderr
+from facegen.processes import run_tool
+from facegen.runtime import Say, progress_bar, silent, warn_stderr
 
 ROTATE_X_PI = np.array([[1.0, 0.0, 0.0],  # the community's rotx for theta = pi (applied as V @ rotx)
                         [0.0, np.cos(np.pi), -np.sin(np.pi)],

@@ -18,7 +18,7 @@ from math import gcd
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.runtime import run_tool
+from facegen.processes import run_tool
 
 MP3_RATES = (8000, 11025, 12000, 16000, 22050, 24000, 32000, 44100, 48000)
 

@@ -1,6 +1,6 @@
 """Video files: rgb24 frames piped to ffmpeg as H.264 MP4 with the clip's audio, frames rendered ahead.
 
-ffmpeg (runtime.start_tool) writes the frames as H.264 yuv420p at the clip's fps; the audio (trimmed or
+ffmpeg (processes.start_tool) writes the frames as H.264 yuv420p at the clip's fps; the audio (trimmed or
 padded to the clip's duration) is muxed in as AAC, and the caller wraps the output in facegen.atomic's
 atomic_path: an error or Ctrl-C leaves no partial file. Frames render on a few threads (the numba kernels
 release the GIL) a few frames ahead of the encoder.
@@ -22,7 +22,8 @@ import numpy as np
 from facegen.atomic import check_writable
 from facegen.audio import write_wav
 from facegen.errors import FacegenError
-from facegen.runtime import progress_bar, start_tool
+from facegen.processes import start_tool
+from facegen.runtime import progress_bar
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
 FRAME_WINDOW = 4  # frames rendered ahead of the encoder

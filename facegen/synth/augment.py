@@ -176,7 +176,7 @@ def band_limit(audio: np.ndarray, sr: int, low: float | None, high: float | None
 
 
 def _ffmpeg(args: list[str], what: str) -> None:
-    from facegen.runtime import run_tool
+    from facegen.processes import run_tool
 
     try:
         proc = run_tool("ffmpeg", ["-y", "-nostdin", "-v", "error", *args], text=True, timeout=120)

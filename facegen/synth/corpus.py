@@ -24,7 +24,7 @@ finished sequences (so an interrupted run resumes); a folder made with other par
 
 Determinism: the same parameters give byte-identical sequence files. libespeak-ng keeps waveform state
 between calls (pitch flutter, gain control) that no API resets, so every speaker is generated in a fresh
-process (runtime.process_pool: spawned, never forked) that synthesises that speaker's sentences in
+process (processes.process_pool: spawned, never forked) that synthesises that speaker's sentences in
 order from e01 up to the last one asked for — also those it does not write (synthesis takes ~0.1 s).
 Parallelism is per speaker.
 
@@ -51,7 +51,8 @@ import numpy as np
 from facegen.atomic import atomic_path
 from facegen.datasets.splits import parse_numbers, parse_subjects, sequence_name
 from facegen.errors import FacegenError
-from facegen.runtime import process_pool, progress_bar, threads
+from facegen.processes import process_pool
+from facegen.runtime import progress_bar, threads
 from facegen.synth.sentences import SENTENCES
 
 CORPUS_VERSION = 1  # bump when the face, rig, voices or sentences change what is generated

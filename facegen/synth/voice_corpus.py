@@ -37,7 +37,8 @@ import numpy as np
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
-from facegen.runtime import process_pool, set_threads
+from facegen.processes import process_pool
+from facegen.runtime import set_threads
 
 VERSION = 1
 MANIFEST = "voices.json"

@@ -23,7 +23,7 @@ import numpy as np
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.phonetics import RADIO_TO_CMU, is_pause
-from facegen.runtime import run_tool, tool_path
+from facegen.processes import run_tool, tool_path
 
 Timing = tuple[str, float, float]
 
@@ -121,7 +121,7 @@ class Engine:
 
 
 def _run(cmd: list[str], what: str, timeout: float, cwd: Path | None = None) -> str:
-    """Run a synthesiser (cmd[0]: its binary's name, runtime.run_tool); its stdout, or a FacegenError
+    """Run a synthesiser (cmd[0]: its binary's name, processes.run_tool); its stdout, or a FacegenError
     carrying the last line of its stderr."""
     try:
         proc = run_tool(cmd[0], cmd[1:], text=True, timeout=timeout, cwd=cwd)

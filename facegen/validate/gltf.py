@@ -34,7 +34,7 @@ from facegen.exchange import gltf as gltf_format
 from facegen.exchange import mp3, read_animation
 from facegen.exchange.wav import sidecar_path
 from facegen.face.mesh import Mesh
-from facegen.runtime import run_tool, tool_path
+from facegen.processes import run_tool, tool_path
 from facegen.validate.checks import check_duration, check_faces, check_values, open_file, read_audio
 from facegen.validate.report import Expected, Report
 from facegen.validate.rig import check_rig
