@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     from facegen.animation import Animation
     from facegen.render import render_animation
-    from facegen.runtime import cores
+    from facegen.runtime import SILENT, cores
 
     anim = talking_clip()
     print(
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
                     Path(tmp) / f"{name}.mp4",
                     size=args.size,
                     compare=other,
-                    progress=False,
+                    reporter=SILENT,
                     threads=args.threads,
                 )
                 wall, cpu = time.perf_counter() - wall, cpu_seconds() - cpu

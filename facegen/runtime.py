@@ -15,6 +15,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Self
 
@@ -210,6 +211,37 @@ def say_stderr(message: str) -> None:
 def warn_stderr(message: str) -> None:
     """The default Say for warnings: one line on stderr."""
     print(f"facegen: warning: {message}", file=sys.stderr)
+
+
+@dataclass(frozen=True)
+class Reporter:
+    """Where a run tells its user what it does — the one type every reporting library function takes (no
+    quiet flags, progress booleans or loose callbacks): `progress` for stage messages (silenced by --quiet),
+    `note` for what the user should always see (a warning, a skipped item), `bars` whether bars are drawn."""
+
+    progress: Say = silent
+    note: Say = silent
+    bars: bool = False
+
+    @classmethod
+    def stderr(cls, quiet: bool = False) -> Reporter:
+        """The command line's: "facegen: ..." progress lines and bars on stderr unless `quiet`; notes
+        always."""
+        return cls(silent if quiet else say_stderr, warn_stderr, not quiet)
+
+    def bar(self, iterable: Iterable | None = None, *, total: int | None = None, desc: str, unit: str = "it",
+            leave: bool = True):
+        """A progress bar (runtime.progress_bar) drawn when this reporter draws bars."""
+        return progress_bar(iterable, total=total, desc=desc, unit=unit, enabled=self.bars, leave=leave)
+
+    def noting(self, note: Say) -> Reporter:
+        """The same reporter with notes going to `note`."""
+        return replace(self, note=note)
+
+
+SILENT = Reporter()  # says nothing: the library's default
+NOTES = Reporter(note=warn_stderr)  # notes on stderr, no progress: the default where a note must not be lost
+BARS = Reporter(bars=True)  # progress bars only: the default of a long library job (render)
 
 
 class Terminated(KeyboardInterrupt):

@@ -16,6 +16,7 @@ from facegen.cli.options import (
     usd_clips_option,
 )
 from facegen.exchange import extensions
+from facegen.runtime import Reporter
 
 
 @click.command(cls=Command, given_by={"path": ("output",)})  # the written file
@@ -89,7 +90,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         if preview:
             from facegen.render import render_animation
 
-            result = render_animation(anim, preview, progress=not quiet)
+            result = render_animation(anim, preview, reporter=Reporter.stderr(quiet))
             for note in result.notes:
                 say(note)
             say(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")

@@ -10,6 +10,7 @@ import click
 from facegen.cli.command import Command
 from facegen.cli.options import FPS, FiniteRange
 from facegen.errors import FacegenError
+from facegen.runtime import Reporter
 
 
 @click.command(cls=Command, given_by={"template": ("model", "template")})
@@ -42,7 +43,7 @@ def render(input_file, output, compare, model, template, fps, size, views, error
 
         mesh = load_bundle(model).template
     result = run(input_file, output, size=size, views=views, compare=compare, template=mesh, fps=fps,
-                 error_scale=error_scale, progress=not quiet)
+                 error_scale=error_scale, reporter=Reporter.stderr(quiet))
     for note in result.notes:
         click.echo(f"facegen: {note}", err=True)
     click.echo(str(result.path))

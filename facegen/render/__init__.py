@@ -41,7 +41,7 @@ from facegen.render.raster import (
     render_image,
 )
 from facegen.render.video import check_output, clip_audio, encode, frames_in_order
-from facegen.runtime import cores
+from facegen.runtime import BARS, Reporter, cores
 
 __all__ = ["RenderResult", "check_output", "check_views", "render", "render_animation", "render_image",
            "render_still"]
@@ -75,7 +75,7 @@ def render_animation(
     compare: Animation | None = None,
     error_scale: float | None = None,
     labels: tuple[str, str] = ("A", "B"),
-    progress: bool = True,
+    reporter: Reporter = BARS,
     threads: int | None = None,
     supersample: int = 2,
 ) -> RenderResult:
@@ -132,7 +132,7 @@ def render_animation(
     rendered = frames_in_order(render_one, frames, threads)
     try:
         with atomic_path(path) as tmp:
-            encode(rendered, frames, width, height, anim.fps, audio, audio_source.sample_rate, tmp, progress)
+            encode(rendered, frames, width, height, anim.fps, audio, audio_source.sample_rate, tmp, reporter)
     finally:
         rendered.close()  # on an error: stop the render threads before returning
     return RenderResult(
@@ -236,7 +236,7 @@ def render(
     template: Mesh | str | os.PathLike | None = None,
     fps: float | None = None,
     error_scale: float | None = None,
-    progress: bool = True,
+    reporter: Reporter = BARS,
     threads: int | None = None,
 ) -> RenderResult:
     """Render an animation (object or file: .usd*, .glb/.gltf, .npy with `template`, else the built-in
@@ -272,7 +272,7 @@ def render(
         compare=other,
         error_scale=error_scale,
         labels=(label_a, label_b),
-        progress=progress,
+        reporter=reporter,
         threads=threads,
     )
 

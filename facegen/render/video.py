@@ -23,7 +23,7 @@ from facegen.atomic import check_writable
 from facegen.audio import write_wav
 from facegen.errors import FacegenError
 from facegen.processes import start_tool
-from facegen.runtime import progress_bar
+from facegen.runtime import Reporter
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
 FRAME_WINDOW = 4  # frames rendered ahead of the encoder
@@ -51,7 +51,7 @@ def encode(
     audio: np.ndarray | None,
     sample_rate: int,
     path: Path,
-    progress: bool,
+    reporter: Reporter,
 ) -> None:
     """Pipe `count` rgb24 frames (an iterator of arrays) to ffmpeg and mux the audio; write `path`."""
     with tempfile.TemporaryDirectory(prefix="facegen-render-") as tmp:
@@ -105,7 +105,7 @@ def encode(
         # ffmpeg's messages go to a file, not a pipe, so it can never block on them
         with (
             open(Path(tmp) / "ffmpeg.log", "w+b") as log,
-            progress_bar(total=count, unit="frame", desc="render", enabled=progress, leave=False) as bar,
+            reporter.bar(total=count, unit="frame", desc="render", leave=False) as bar,
         ):
             # own session: a terminal's Ctrl-C reaches only us; we stop ffmpeg ourselves
             proc = start_tool("ffmpeg", cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
