@@ -185,7 +185,7 @@ def rig_clip(frames: int, fps: float = 25.0, seed: int = 0, sample_rate: int = 1
     vertices = rig.pose(curves)
     n = round(seconds * sample_rate)
     envelope = np.interp(np.arange(n) / sample_rate, np.arange(frames) / fps, curves[:, 0] + 0.05)
-    audio = (0.5 * envelope * rng.standard_normal(n)).astype(np.float32)
+    audio = np.clip(0.5 * envelope * rng.standard_normal(n), -0.99, 0.99).astype(np.float32)  # as a WAV holds
     return Animation(vertices=vertices, faces=mesh.faces, fps=fps, template=mesh.vertices, audio=audio,
                      sample_rate=sample_rate, regions=dict(mesh.regions), metadata={"speaker": "test",
                                                                                     "seed": seed})
@@ -300,11 +300,13 @@ def train_toy(toy, out, **kw):
     TrainConfig fields and train()'s run-time arguments (device, resume, ...) alike."""
     import dataclasses
 
+    from facegen.runtime import Reporter
     from facegen.train import train
     from facegen.train_config import TrainConfig
 
     options = {"modalities": "audio", "epochs": 2, "lr": 3e-3, "splits": TOY_SPLITS, "model_options": SMALL,
-               "device": "cpu", "quiet": True, "cache_dir": toy / ".cache", "threads": 1, **kw}
+               "device": "cpu", "reporter": Reporter.stderr(quiet=True), "cache_dir": toy / ".cache",
+               "threads": 1, **kw}
     fields = {f.name for f in dataclasses.fields(TrainConfig)}
     config = TrainConfig(**{k: v for k, v in options.items() if k in fields})
     return train(toy, out, config, **{k: v for k, v in options.items() if k not in fields})

@@ -282,7 +282,7 @@ def test_blender_plays_value_clips(tmp_path):
             pytest.fail(f"{BLENDER_PYTHON} is missing in CI: `make test` runs `make blender-venv` first")
         pytest.skip(f"{BLENDER_PYTHON} is missing: run `make blender-venv` to test the Blender import")
     frames = 60
-    clip = rig_clip(frames, seed=3)
+    clip = rig_clip(frames, seed=6)  # adjacent frames across each boundary differ by > 10x the tolerance
     path = tmp_path / "clip.usdc"
     written = write_animation(clip, path, clips=16)
     assert len(written) == 2 + 2 + 4

@@ -35,7 +35,6 @@ only; lists of one scalar type become typed arrays, other lists JSON strings)}.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from collections.abc import Iterator
@@ -52,6 +51,7 @@ from facegen.exchange import usd_clips, usd_skel
 from facegen.exchange.basis import stored, writer_basis
 from facegen.exchange.formats import by_module
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
+from facegen.exchange.usd_values import python_value, usd_dict
 from facegen.exchange.wav import atomic_with_sidecar
 from facegen.face.mesh import Mesh, check_topology
 
@@ -214,7 +214,7 @@ def _author_stage(
             "mode": mode,
             "fps": float(anim.fps),
             "frames": int(frames),
-            "metadata": _usd_dict(anim.metadata),
+            "metadata": usd_dict(anim.metadata),
             **(info or {}),
         }
     }
@@ -254,54 +254,6 @@ def _author_samples(layer, anim: Animation) -> None:
                 frame = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(block[i], dtype=np.float32))
                 layer.SetTimeSample(points, float(start + i), frame)
                 layer.SetTimeSample(extent, float(start + i), UsdGeom.PointBased.ComputeExtent(frame))
-
-
-def _usd_dict(values: dict) -> dict:
-    """The JSON-able part of a dict as USD dictionary values (lists become typed Vt arrays)."""
-    out = {}
-    for key, value in values.items():
-        converted = _usd_value(value)
-        if converted is not None:
-            out[str(key)] = converted
-    return out
-
-
-def _usd_value(value):
-    from pxr import Vt
-
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, bool | int | float | str):
-        return value
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, dict):
-        return _usd_dict(value)
-    if isinstance(value, list | tuple | np.ndarray):
-        items = [v.item() if isinstance(v, np.generic) else v for v in value]
-        if items and all(isinstance(v, str) for v in items):
-            return Vt.StringArray(items)
-        if items and all(isinstance(v, int) and not isinstance(v, bool) for v in items):
-            return Vt.Int64Array(items)
-        if items and all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
-            return Vt.DoubleArray([float(v) for v in items])
-        try:
-            return json.dumps(items)
-        except (TypeError, ValueError):
-            return None
-    return None
-
-
-def _python_value(value):
-    """USD dictionary values back to plain Python (Vt arrays become lists)."""
-    if isinstance(value, dict):
-        return {k: _python_value(v) for k, v in value.items()}
-    if isinstance(value, bool | int | float | str):
-        return value
-    try:
-        return [_python_value(v) for v in value]
-    except TypeError:
-        return str(value)
 
 
 # ---- reading -----------------------------------------------------------------------------------------
@@ -510,5 +462,5 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
             raise FacegenError(f"{path} refers to audio {asset!r}, which is missing: put it beside the file")
         audio, sample_rate = read_audio_asset(resolved)
     info = stage.GetRootLayer().customLayerData.get("facegen", {})
-    metadata = _python_value(info.get("metadata", {})) if isinstance(info, dict) else {}
+    metadata = python_value(info.get("metadata", {})) if isinstance(info, dict) else {}
     return Animation.from_mesh(face, vertices, rate, audio=audio, sample_rate=sample_rate, metadata=metadata)
