@@ -42,17 +42,19 @@ def check_writable(target: str | os.PathLike) -> None:
     target = Path(target)
     folder = _folder(target)
     if not folder.is_dir():
-        raise FacegenError(f"output folder {folder} does not exist: create it or choose another -o path")
+        raise FacegenError(f"output folder {folder} does not exist: create it or choose another output path",
+                           param="path")
     if not os.access(folder, os.W_OK):
-        raise FacegenError(f"output folder {folder} is not writable: choose another -o path")
+        raise FacegenError(f"output folder {folder} is not writable: choose another output path",
+                           param="path")
     limit = _name_max(folder)
     size = len(os.fsencode(target.name))
     if size > limit:
         raise FacegenError(f"output name {target.name[:40]}... is {size} bytes long; this file system allows "
-                           f"{limit}: choose a shorter -o name")
+                           f"{limit}: choose a shorter output name", param="path")
     if target.is_dir():
         raise FacegenError(f"{target} is a folder, so facegen cannot write that file there: rename or remove "
-                           "the folder, or choose another -o name")
+                           "the folder, or choose another output name", param="path")
 
 
 def _umask() -> int:
@@ -125,7 +127,8 @@ def disk_full_error(target: str | os.PathLike, exc: BaseException | None,
     if not full:
         return None
     return FacegenError(f"no space left on {_device(folder)} writing {target}: need about "
-                        f"{max(1, round(need_bytes / 1e6))} MB; free some space or choose another -o folder")
+                        f"{max(1, round(need_bytes / 1e6))} MB; free some space or choose another output "
+                        "folder", param="path")
 
 
 def _device(folder: Path) -> str:
@@ -203,7 +206,8 @@ class Transaction:
             full = disk_full_error(target, exc)
             if full is not None:
                 raise full from exc
-            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
+            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another output path",
+                               param="path") from exc
         os.close(fd)
         temp = Path(tmp)
         temp.unlink()  # writers (pxr, soundfile, ...) create the file themselves
@@ -216,7 +220,7 @@ class Transaction:
         target = Path(target)
         if target.exists() and not target.is_dir():
             raise FacegenError(f"{target} is a file, so facegen cannot write the folder there: rename or "
-                               "remove it, or choose another -o name")
+                               "remove it, or choose another output name", param="path")
         check_writable(_folder(target) / f"{target.name}.new")  # a writable parent, a name not too long
         temp = self._mkdtemp(target)
         self._root._staged.append(_Staged("folder", target, temp))
@@ -237,7 +241,8 @@ class Transaction:
         try:
             return Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=folder))
         except OSError as exc:
-            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another -o path") from exc
+            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another output path",
+                               param="path") from exc
 
     def __exit__(self, kind, exc, traceback) -> None:
         if self._token is not None:

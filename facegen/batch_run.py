@@ -74,7 +74,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     if jobs is not None and jobs < 1:
         raise FacegenError(f"the number of jobs must be at least 1, got {jobs}", param="jobs")
     if engine not in ENGINES:
-        raise FacegenError(f"unknown engine {engine!r}: use {' or '.join(ENGINES)}")
+        raise FacegenError(f"unknown engine {engine!r}: use {' or '.join(ENGINES)}", param="engine")
     if ray_address is not None and engine != "ray":
         raise FacegenError("a Ray address applies to the ray engine only", param=("ray_address", "engine"))
     exts = parse_formats(formats)

@@ -157,7 +157,7 @@ def check_output(path: str | os.PathLike) -> Path:
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise FacegenError(
             f"cannot write a video to {path.name!r}: use a {', '.join(VIDEO_SUFFIXES)} file name "
-            "(-o preview.mp4)"
+            "(e.g. preview.mp4)"
         )
     check_writable(path)
     return path
