@@ -9,7 +9,7 @@ A rig gives named targets (offsets from the template) and a weight curve per tar
     arkit   Apple's 52 ARKit blend shapes of the face (facegen.arkit.shapes) with the weights the solver
             fits to the clip (facegen.arkit.solve): an asset any ARKit-aware engine retargets by name
 
-Both are a pca.MorphBasis, so every writer has one code path. As stored (`stored`), a frame is
+Both are a pca.MorphBasis, so every writer has one code path. As written (`targets_as_written`), a frame is
 
     points(t) = template + sum_k weights[t, k] * offsets[k]
 
@@ -96,7 +96,7 @@ def _arkit_basis(anim: Animation) -> MorphBasis:
     return basis
 
 
-def stored(basis: MorphBasis) -> tuple[list[str], np.ndarray, np.ndarray]:
+def targets_as_written(basis: MorphBasis) -> tuple[list[str], np.ndarray, np.ndarray]:
     """(names, offsets [K', V, 3], weights [T, K']) as written over the template: the basis's targets,
     plus the `rest` target with weight 1 in every frame when the basis has a nonzero constant offset."""
     names = list(basis.names)

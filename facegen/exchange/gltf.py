@@ -48,7 +48,7 @@ from facegen.atomic import atomic_path
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
-from facegen.exchange.basis import normal_deltas, stored, writer_basis
+from facegen.exchange.basis import normal_deltas, targets_as_written, writer_basis
 from facegen.exchange.formats import by_module
 from facegen.exchange.pca import MorphBasis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
@@ -133,7 +133,7 @@ def build(
 
     base = np.asarray(anim.template, dtype=np.float32)
     faces = np.asarray(anim.faces)
-    names, offsets, weights = stored(basis)
+    names, offsets, weights = targets_as_written(basis)
     index_type = np.uint16 if len(base) < 65536 else np.uint32
     index_component = UNSIGNED_SHORT if index_type is np.uint16 else UNSIGNED_INT
     position = accessor(base, "VEC3", ARRAY_BUFFER, with_bounds=True)

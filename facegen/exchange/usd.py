@@ -48,7 +48,7 @@ from facegen.atomic import Transaction
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_clips, usd_skel
-from facegen.exchange.basis import stored, writer_basis
+from facegen.exchange.basis import targets_as_written, writer_basis
 from facegen.exchange.formats import by_module
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.usd_values import python_value, usd_dict
@@ -126,7 +126,7 @@ def write(
             else:
                 _author_samples(layer, anim)
         else:
-            names, offsets, weights = stored(basis)
+            names, offsets, weights = targets_as_written(basis)
             info = {"reconstruction": usd_skel.layer_info(basis, len(names))}
             extents = usd_skel.frame_extents(anim.template, offsets, weights)
             bounds = np.stack([extents[:, 0].min(0), extents[:, 1].max(0)])
