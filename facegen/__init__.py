@@ -8,6 +8,7 @@ The library API, imported lazily (``import facegen`` stays light, so ``facegen -
     facegen.write_animation(anim, "line.usdc")          # any of facegen.exchange.extensions()
     again = facegen.read_animation("line.usdc")
     bundle = facegen.load_bundle()                       # the built-in model (or a path to your own)
+    facegen.animate("line.wav", reporter=facegen.Reporter(progress=print, note=print))  # say what it does
 """
 
 from __future__ import annotations
@@ -25,9 +26,10 @@ _API = {
     "read_animation": "facegen.exchange",
     "write_animation": "facegen.exchange",
     "FacegenError": "facegen.errors",
+    "Reporter": "facegen.runtime",
 }
-__all__ = ["Animation", "Animator", "FacegenError", "__version__", "animate", "load_bundle", "read_animation",
-           "write_animation"]
+__all__ = ["Animation", "Animator", "FacegenError", "Reporter", "__version__", "animate", "load_bundle",
+           "read_animation", "write_animation"]
 
 if TYPE_CHECKING:
     from facegen.animation import Animation
@@ -35,6 +37,7 @@ if TYPE_CHECKING:
     from facegen.bundle import load_bundle
     from facegen.errors import FacegenError
     from facegen.exchange import read_animation, write_animation
+    from facegen.runtime import Reporter
 
 
 def __getattr__(name: str):

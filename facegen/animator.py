@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +28,7 @@ from facegen.animation import Animation
 from facegen.audio import check_speech, load_audio, mel_features, num_frames
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, check_topology, read_mesh
-from facegen.runtime import PROFILE, Say, select_device, silent
+from facegen.runtime import PROFILE, SILENT, Reporter, select_device, silent
 from facegen.word_timing import NONE, clip_words, clip_words_and_phones, force_aligned
 
 LONG_INPUT_SECONDS = 20.0  # stage-by-stage progress is reported for clips at least this long
@@ -162,7 +162,7 @@ class Animator:
     def prepare(self, audio: str | os.PathLike, *, text: str | None = None,
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
-                progress: Say = silent, warn: Say = silent, aligned: Aligned | None = None,
+                reporter: Reporter = SILENT, aligned: Aligned | None = None,
                 meanwhile: Callable[[], object] | None = None) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
@@ -171,13 +171,12 @@ class Animator:
         ahead = self._take_ahead(audio, text) or aligned
         try:
             return self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
-                                 template=template, progress=progress, warn=warn, ahead=ahead,
-                                 meanwhile=meanwhile)
+                                 template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile)
         finally:
             if ahead is not None and ahead is not aligned:
                 self.close()
 
-    def _prepare(self, audio, *, text, alignment, no_text, speaker, template, progress, warn, ahead,
+    def _prepare(self, audio, *, text, alignment, no_text, speaker, template, reporter: Reporter, ahead,
                  meanwhile) -> Clip:
         bundle = self.bundle
         spk = bundle.speaker_index(speaker)
@@ -188,7 +187,7 @@ class Animator:
         check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
         T = num_frames(len(samples) / sr, cfg.fps)
         if len(samples) / sr < LONG_INPUT_SECONDS:
-            progress = silent
+            reporter = replace(reporter, progress=silent)
         with PROFILE.stage("audio_features"):  # before the words: done while an alignment started ahead runs
             mel = mel_features(samples, sr, cfg, bundle.mel_filters)
 
@@ -211,16 +210,16 @@ class Animator:
         if bundle.config.n_phones:
             with PROFILE.stage("alignment"):
                 words, source, phone_feats = clip_words_and_phones(
-                    samples, sr, T, cfg.fps, text=text, alignment=alignment, no_text=no_text, warn=warn,
-                    ahead=ahead)
+                    samples, sr, T, cfg.fps, text=text, alignment=alignment, no_text=no_text,
+                    reporter=reporter, ahead=ahead)
         if uses_text:
             if not bundle.config.n_phones:
                 with PROFILE.stage("alignment"):
-                    words, source = clip_words(samples, sr, text=text, alignment=alignment, progress=progress,
-                                               warn=warn, ahead=ahead)
+                    words, source = clip_words(samples, sr, text=text, alignment=alignment, reporter=reporter,
+                                               ahead=ahead)
             from facegen.text import frame_features, text_features
 
-            progress(f"text features ({bundle.text_backend}) for {len(words)} words")
+            reporter.progress(f"text features ({bundle.text_backend}) for {len(words)} words")
             if early is not None and early[0] == [w.text for w in words]:
                 text_feats = frame_features(words, early[1], T, cfg)
             else:
@@ -228,7 +227,7 @@ class Animator:
                 with PROFILE.stage("text_features"):
                     text_feats = text_features(words, backend, T, cfg)
 
-        progress(f"inference for {T} frames")
+        reporter.progress(f"inference for {T} frames")
         return Clip(mel, text_feats, spk, phone_feats, audio_name=Path(audio).name, samples=samples,
                     sample_rate=sr, words=words, word_timing=source, mesh=mesh)
 
@@ -308,7 +307,7 @@ class Animator:
     def animate(self, audio: str | os.PathLike, *, text: str | None = None,
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
-                stream: bool = False, progress: Say = silent, warn: Say = silent,
+                stream: bool = False, reporter: Reporter = SILENT,
                 meanwhile: Callable[[], object] | None = None) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
@@ -316,7 +315,7 @@ class Animator:
         try:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
-                                template=template, progress=progress, warn=warn, meanwhile=meanwhile)
+                                template=template, reporter=reporter, meanwhile=meanwhile)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -330,7 +329,7 @@ class Animator:
 def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str | os.PathLike | None = None,
             no_text: bool = False, speaker: str | int | None = None, bundle=None,
             template: str | os.PathLike | Mesh | None = None, text_model: str | None = None,
-            device: str = "auto", stream: bool = False, progress: Say = silent, warn: Say = silent,
+            device: str = "auto", stream: bool = False, reporter: Reporter = SILENT,
             meanwhile: Callable[[], object] | None = None) -> Animation:
     """Animate the face for one speech clip.
 
@@ -340,13 +339,14 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     CPU), "cpu" or "cuda" (a FacegenError without a GPU).
     With `stream=True` the Animation's vertices are a FrameStream, computed block by block as a writer
     reads them (bounded memory for long clips); otherwise a [T, V, 3] float32 array.
-    `progress` receives stage messages for long clips (>= 20 s), `warn` receives notes the user should
-    always see. If the forced alignment started ahead (see Animator) still runs once the model is loaded,
-    `meanwhile` is called (e.g. to import the writer's libraries).
+    `reporter` (a facegen.Reporter; default: silent) receives stage messages for long clips (>= 20 s) as
+    its `progress` and notes the user should always see (e.g. "no transcript given") as its `note`, e.g.
+    `Reporter(progress=print, note=print)`. If the forced alignment started ahead (see Animator) still
+    runs once the model is loaded, `meanwhile` is called (e.g. to import the writer's libraries).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template,
-        stream=stream, progress=progress, warn=warn, meanwhile=meanwhile)
+        stream=stream, reporter=reporter, meanwhile=meanwhile)
 
 
 def forced_alignment_of(model: str | os.PathLike | None) -> str | None:

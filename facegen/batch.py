@@ -24,7 +24,7 @@ from facegen.align_ahead import Aligned
 from facegen.animator import BATCH_SIZE, Animator
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension, write_animation
-from facegen.runtime import Say, silent
+from facegen.runtime import SILENT, Reporter
 
 
 @dataclass
@@ -258,24 +258,24 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
 
 
 def animate_many(jobs: Iterable[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,
-                 window: int = 64, warn: Say = silent) -> Iterator[tuple[Job, object]]:
+                 window: int = 64, reporter: Reporter = SILENT) -> Iterator[tuple[Job, object]]:
     """Animate many clips with one Animator (the built-in model on the CPU or GPU if None): yields
     (job, Animation) or (job, FacegenError) for every job, in the input order within windows of `window` jobs.
 
     Within a window, the clips run through the decoder BiLSTMs `batch_size` at a time (Animator.run: packed,
     each clip's result equals its own single run). The frames of each Animation are a FrameStream (computed
-    when the writer reads them).
+    when the writer reads them). Notes (e.g. "no transcript given") go to `reporter.note`.
     """
     for job, anim, _, _ in _animate_timed(jobs, animator=animator or Animator(), batch_size=batch_size,
-                                          window=window, warn=warn):
+                                          window=window, reporter=reporter):
         yield job, anim
 
 
 def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, window: int,
-                   warn: Say) -> Iterator[tuple[Job, object, float, list[str]]]:
+                   reporter: Reporter) -> Iterator[tuple[Job, object, float, list[str]]]:
     """animate_many's (job, Animation or FacegenError) with the (wall, CPU) seconds spent on each job's
     preparation and its share of the network, and the notes said while preparing it (also passed to
-    `warn`)."""
+    `reporter.note`)."""
     pending: list[Job] = []
 
     def run(window_jobs: list[Job]) -> Iterator[tuple[Job, object, float, list[str]]]:
@@ -288,14 +288,14 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
 
             def note(msg: str, said: list[str] = said) -> None:
                 said.append(msg)
-                warn(msg)
+                reporter.note(msg)
 
             try:
                 if job.problem:
                     raise FacegenError(job.problem)
                 prepared[i] = animator.prepare(job.audio, text=job.text, alignment=job.alignment,
-                                               no_text=job.no_text, speaker=job.speaker, warn=note,
-                                               aligned=job.aligned)
+                                               no_text=job.no_text, speaker=job.speaker,
+                                               reporter=SILENT.noting(note), aligned=job.aligned)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error
@@ -325,14 +325,15 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
 
 
 def run_batch(jobs: Sequence[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,
-              validate: bool = True, say: Say = silent, warn: Say = silent) -> list[JobResult]:
+              validate: bool = True, reporter: Reporter = SILENT) -> list[JobResult]:
     """Animate every job and write each of its targets (format from the extension) from one inference, then
     (`validate`) check each file as `facegen validate` does. A clip that fails is reported in its JobResult
-    and the others go on; notes (e.g. "no transcript given") go to `warn` and into the result. Returns one
-    JobResult per job, in order."""
+    and the others go on; a line per clip goes to `reporter.progress`, notes (e.g. "no transcript given") to
+    `reporter.note` and into the result. Returns one JobResult per job, in order."""
     results = []
     start = time.perf_counter()
-    timed = _animate_timed(jobs, animator=animator or Animator(), batch_size=batch_size, window=64, warn=warn)
+    timed = _animate_timed(jobs, animator=animator or Animator(), batch_size=batch_size, window=64,
+                           reporter=reporter)
     for n, (job, anim, prep, notes) in enumerate(timed, 1):
         t0 = _clocks()
         result = JobResult(job, notes=notes)
@@ -351,9 +352,10 @@ def run_batch(jobs: Sequence[Job], *, animator: Animator | None = None, batch_si
                 result.error = one_line(exc)
         result.seconds, result.cpu_seconds = (prep + _clocks() - t0).tolist()
         results.append(result)
-        say(f"[{n}/{len(jobs)}] {job.output}: " + (f"{result.frames} frames" if result.ok else
-                                                   f"{result.status}: {result.error or _failed(result)}")
-            + f" ({time.perf_counter() - start:.1f} s)")
+        reporter.progress(f"[{n}/{len(jobs)}] {job.output}: "
+                          + (f"{result.frames} frames" if result.ok else
+                             f"{result.status}: {result.error or _failed(result)}")
+                          + f" ({time.perf_counter() - start:.1f} s)")
     return results
 
 

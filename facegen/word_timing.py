@@ -14,7 +14,7 @@ import numpy as np
 
 from facegen.align_ahead import AlignAhead, Aligned
 from facegen.errors import FacegenError
-from facegen.runtime import Say, silent
+from facegen.runtime import SILENT, Reporter
 
 FORCED, FILE, RECOGNISED, NONE = ("forced alignment", "alignment file", "speech recognition",
                                   "none (--no-text)")
@@ -32,7 +32,7 @@ def _check_transcript(text: str) -> None:
 
 
 def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
-               alignment: str | os.PathLike | None = None, progress: Say = silent, warn: Say = silent,
+               alignment: str | os.PathLike | None = None, reporter: Reporter = SILENT,
                ahead: AlignAhead | Aligned | None = None) -> tuple[list, str]:
     """Word timings for the clip and where they came from (alignment file, forced alignment, recognition);
     `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py)."""
@@ -43,10 +43,10 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
         return read_alignment(alignment, duration=len(samples) / sr), FILE
     if text is not None:
         _check_transcript(text)
-        progress("aligning the transcript to the speech (pocketsphinx)")
+        reporter.progress("aligning the transcript to the speech (pocketsphinx)")
         return forced(samples, sr, text, ahead, with_phones=False)[0], FORCED
-    warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
-         "transcript; pass --text, --text-file or --alignment for better upper-face motion)")
+    reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
+                  "transcript; pass --text, --text-file or --alignment for better upper-face motion)")
     return align.recognize(samples, sr), RECOGNISED
 
 
@@ -65,7 +65,7 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
 
 
 def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
-                          alignment, no_text: bool, warn: Say,
+                          alignment, no_text: bool, reporter: Reporter,
                           ahead: AlignAhead | Aligned | None = None) -> tuple[list, str, np.ndarray]:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
@@ -94,10 +94,10 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
         found = phone_frames(phones, num_frames, fps)
     except FacegenError:
         words, found = recognised, silence(num_frames)
-        warn("no phones could be found in the audio without a transcript: the lips follow the audio alone "
-             "(pass --text for better lip sync)")
+        reporter.note("no phones could be found in the audio without a transcript: the lips follow the audio "
+                      "alone (pass --text for better lip sync)")
     if not no_text:
-        warn("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
-             "transcript; pass --text, --text-file or --alignment for better lips and upper face)")
+        reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
+                      "a transcript; pass --text, --text-file or --alignment for better lips and upper face)")
         return words, RECOGNISED, found
     return [], NONE, found

@@ -21,7 +21,7 @@ from facegen.batch import Job, animate_many, read_manifest
 from facegen.errors import FacegenError
 from facegen.inference import FrameStream, decoder_states, frame_stream, predict_frames
 from facegen.model import one_hot
-from facegen.runtime import select_device
+from facegen.runtime import Reporter, select_device
 
 REPO = Path(__file__).resolve().parents[1]
 SENTENCES = ("What an excellent room you have, sir.", "Such expensive furnishings!",
@@ -261,7 +261,8 @@ def test_run_batch_writes_every_output_and_reports_failures(bundle, clips, tmp_p
     jobs.append(Job(audio=items[2][0], output=tmp_path / "out" / "bad.npy", alignment=items[2][1],
                     speaker="Z9"))
     said = []
-    results = run_batch(jobs, animator=Animator(bundle, device="cpu"), say=said.append)
+    results = run_batch(jobs, animator=Animator(bundle, device="cpu"),
+                        reporter=Reporter(progress=said.append))
     assert [r.ok for r in results] == [True, True, False] and "unknown speaker" in results[2].error
     for r in results[:2]:
         assert r.files == [r.job.output, r.job.output.with_suffix(".wav")]

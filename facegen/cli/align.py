@@ -7,7 +7,7 @@ import json
 import click
 
 from facegen.cli.command import Command
-from facegen.cli.options import one_of, progress, protect_inputs, read_text
+from facegen.cli.options import one_of, protect_inputs, read_text
 from facegen.errors import FacegenError
 
 
@@ -24,6 +24,7 @@ def align(audio, text, text_file, output, phones):
     """Find when each word (and with --phones each phone) of the transcript is spoken in AUDIO."""
     from facegen.alignment_files import alignment_format, alignment_json, write_alignment
     from facegen.audio import check_speech, load_audio
+    from facegen.runtime import Reporter, say_stderr
     from facegen.word_timing import clip_words
 
     one_of(text=text, text_file=text_file)
@@ -40,7 +41,7 @@ def align(audio, text, text_file, output, phones):
 
         words, found = align_phones(samples, sr, transcript)
     else:
-        words, _ = clip_words(samples, sr, text=transcript, warn=progress(False))
+        words, _ = clip_words(samples, sr, text=transcript, reporter=Reporter(note=say_stderr))
         found = None
     if output:
         write_alignment(words, output, duration=len(samples) / sr, phones=found)

@@ -10,13 +10,12 @@ from facegen.cli.options import (
     FiniteRange,
     morph_targets_option,
     one_of,
-    progress,
     protect_inputs,
     read_text,
     usd_clips_option,
 )
 from facegen.exchange import extensions
-from facegen.runtime import Reporter
+from facegen.runtime import Reporter, say_stderr
 
 
 @click.command(cls=Command, given_by={"path": ("output",)})  # the written file
@@ -79,18 +78,21 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         # the model loads for the check: its transcript's alignment starts first, so the two overlap
         animator.align_ahead(audio, text=transcript, alignment=alignment, no_text=no_text)
         plan.check_template(animator.mesh(template))
-    say = progress(quiet)
+    # notes are "facegen: ..." lines (not "warning:"), said also with --quiet
+    reporter = Reporter.stderr(quiet).noting(say_stderr)
     # plan.streams: the writer reads frames block by block, no [T, V, 3] array in memory
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
-                            template=template, stream=plan.streams, progress=say, warn=progress(False),
+                            template=template, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer)
     with Transaction():  # all or nothing: no animation without the preview asked for
         written = plan.write(anim)
-        say(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at {anim.fps:g} fps)")
+        reporter.progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at "
+                          f"{anim.fps:g} fps)")
         if preview:
             from facegen.render import render_animation
 
-            result = render_animation(anim, preview, reporter=Reporter.stderr(quiet))
+            result = render_animation(anim, preview, reporter=reporter)
             for note in result.notes:
-                say(note)
-            say(f"wrote {result.path} ({result.width}x{result.height}, {result.seconds:.1f} s to render)")
+                reporter.progress(note)
+            reporter.progress(f"wrote {result.path} ({result.width}x{result.height}, "
+                              f"{result.seconds:.1f} s to render)")

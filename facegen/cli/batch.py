@@ -38,12 +38,13 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
     speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
     are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed."""
     from facegen.batch_run import run_manifest
-    from facegen.runtime import progress_bar
+    from facegen.runtime import Reporter
 
+    reporter = Reporter.stderr(quiet)
     bars = []  # made once the plan says how many items there are
 
     def planned(total: int, _to_run: int) -> None:
-        bars.append(progress_bar(total=total, desc="batch", unit="clip", enabled=not quiet, leave=False))
+        bars.append(reporter.bar(total=total, desc="batch", unit="clip", leave=False))
 
     try:
         outcome = run_manifest(manifest, output_dir, jobs=jobs, formats=formats, force=force, engine=engine,
