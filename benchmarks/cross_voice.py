@@ -41,8 +41,9 @@ def _splits(test: str):
 
 def evaluate_set(bundle, corpus: str, test: str, limit: int | None) -> dict:
     from facegen.evaluate import evaluate
+    from facegen.runtime import SILENT
 
-    result = evaluate(bundle, corpus, "test-a", splits=_splits(test), quiet=True, warn=None)
+    result = evaluate(bundle, corpus, "test-a", splits=_splits(test), reporter=SILENT)
     return {"metrics": result["metrics"], "lipsync": result["lipsync"], "sequences": result["sequences"]}
 
 
@@ -51,12 +52,13 @@ def unseen_word_response(bundle_path, corpus: str, test: str, limit: int | None)
     from facegen.alignment_files import read_alignment
     from facegen.evaluate import prepare
     from facegen.lipsync import FaceGeometry, upper_face_response
+    from facegen.runtime import SILENT
     from facegen.synth.sentences import neutral_twin
     from facegen.synth.voice_corpus import XVOICE_OFFSET
     from facegen.text import load_text_backend, text_features
     from facegen.words import Word, strip_edges
 
-    run = prepare(bundle_path, corpus, "test-a", splits=_splits(test), quiet=True, warn=None)
+    run = prepare(bundle_path, corpus, "test-a", splits=_splits(test), reporter=SILENT)
     bundle = run.bundle
     if not bundle.config.uses_text:
         return {"response": None, "sequences": 0}

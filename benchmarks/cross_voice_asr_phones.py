@@ -28,10 +28,11 @@ def main(argv: list[str] | None = None) -> int:
     from facegen.evaluate import _lipsync_geometry, _lipsync_row, pool, prepare, sequence_metrics
     from facegen.lipsync import format_lipsync, pool_lipsync
     from facegen.phonetics import phone_frames
+    from facegen.runtime import SILENT
 
     splits = Splits(train_subjects=("F2", "F3", "F4", "M3", "M4", "M5"), test_subjects=(),
                     train_sentences="49-1776", val_sentences="1777-1992", test_sentences=args.test_sentences)
-    run = prepare(args.bundle, args.corpus, "test-a", splits=splits, quiet=True, warn=None)
+    run = prepare(args.bundle, args.corpus, "test-a", splits=splits, reporter=SILENT)
     geometry = _lipsync_geometry(run.bundle)
     fps = run.bundle.features.fps
     rows, lip_rows, failed = [], [], 0

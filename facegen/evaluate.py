@@ -44,7 +44,7 @@ from facegen.datasets.splits import Splits, check_split
 from facegen.errors import FacegenError
 from facegen.face.regions import LIPS, UPPER_FACE, file_stem
 from facegen.lipsync import pool_lipsync
-from facegen.runtime import Say, progress_bar, warn_stderr
+from facegen.runtime import STDERR, Reporter
 
 if TYPE_CHECKING:
     from facegen.bundle import Bundle
@@ -160,13 +160,13 @@ def prepare(
     text_model_path: str | os.PathLike | None = None,
     device: str = "cpu",
     on_bad: str = "skip",
-    quiet: bool = False,
-    warn: Say | None = warn_stderr,
+    reporter: Reporter = STDERR,
 ) -> Run:
     """Load the bundle and the features of a split's usable sequences, with the checks evaluate needs.
 
     `splits` defaults to the split the bundle was trained with (its provenance), else the community's
-    with the bundle's speakers as training subjects.
+    with the bundle's speakers as training subjects. `reporter` (default: on stderr) draws the bars and
+    hears of every skipped sequence (its notes).
     """
     check_split(split)
     animator = Animator(bundle_path, text_model=text_model_path, device=device)
@@ -176,7 +176,7 @@ def prepare(
         known = bundle.provenance.get("split")
         splits = Splits.from_dict(known) if known else Splits(train_subjects=tuple(bundle.speakers),
                                                                    test_subjects=())
-    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, warn=warn)
+    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, reporter=reporter)
     cfg = bundle.config
     backend = animator.text_backend() if cfg.uses_text else None
     sequences = dataset.split(split, splits)
@@ -185,7 +185,7 @@ def prepare(
         if strangers:
             raise FacegenError(f"subjects {' '.join(strangers)} of split {split} are not speakers of the "
                                f"model ({', '.join(bundle.speakers)}): evaluate them as test-b")
-    items = dataset.load(sequences, bundle.features, bundle.mel_filters, backend, progress=not quiet)
+    items = dataset.load(sequences, bundle.features, bundle.mel_filters, backend)
     if not items:
         raise FacegenError(f"no usable sequence of split {split} in {dataset.root}: check the files named "
                            "above")
@@ -215,20 +215,20 @@ def evaluate(bundle_path: str | os.PathLike | None, data_root: str | os.PathLike
              **options) -> dict:
     """Evaluate a model bundle on a split of the dataset at `data_root` (see the module docstring).
 
-    `options` are those of `prepare` (splits, cache_dir, text_model_path, device, on_bad, quiet, warn);
+    `options` are those of `prepare` (splits, cache_dir, text_model_path, device, on_bad, reporter);
     `splits` defaults to the split the bundle was trained with (its provenance), else the community's
     with the bundle's speakers as training subjects. Returns a JSON-ready dict: bundle, data, split,
     conditioning, metrics (pooled), units, per_sequence rows, skipped sequences.
     """
     run = prepare(bundle_path, data_root, split, **options)
-    quiet = options.get("quiet", False)
+    reporter = options.get("reporter", STDERR)
     bundle, dataset, items = run.bundle, run.dataset, run.items
     num_vertices = bundle.template.num_vertices
     pooled_rows: list[dict] = []
     per_sequence: list[dict] = []
     lip_rows: list[dict] = []
     geometry = _lipsync_geometry(bundle)
-    bar = progress_bar(items, desc=f"evaluate {split}", unit="seq", enabled=not quiet, leave=False)
+    bar = reporter.bar(items, desc=f"evaluate {split}", unit="seq", leave=False)
     for item in bar:
         conditions = run.conditions(item)
         gt = item.vertices().reshape(item.num_frames, num_vertices, 3)

@@ -38,7 +38,7 @@ from facegen.datasets.biwi import Item
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.figures import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
-from facegen.runtime import progress_bar, say_stderr, silent, threads
+from facegen.runtime import SILENT, STDERR, Reporter, silent, threads
 
 if TYPE_CHECKING:
     from facegen.evaluate import Run
@@ -148,10 +148,11 @@ class Predictions:
         return sum(len(a) for a in self.activation)
 
 
-def predict_split(run: Run, quiet: bool = True) -> Predictions:
-    """Offsets, encoder outputs and upper-face activation of every sequence of a facegen.evaluate.Run."""
+def predict_split(run: Run, reporter: Reporter = SILENT) -> Predictions:
+    """Offsets, encoder outputs and upper-face activation of every sequence of a facegen.evaluate.Run (a bar
+    when `reporter` draws bars)."""
     out = Predictions(items=list(run.items))
-    for item in progress_bar(run.items, desc="plots", unit="seq", enabled=not quiet, leave=False):
+    for item in reporter.bar(run.items, desc="plots", unit="seq", leave=False):
         offsets, enc = run.predict(item, run.conditions(item)[0], encoders=True)
         out.offsets.append(offsets.astype(np.float32, copy=False))
         for k, v in enc.items():
@@ -304,14 +305,13 @@ def write_plots(
     text_model_path: str | os.PathLike | None = None,
     device: str = "cpu",
     cache_dir: str | os.PathLike | None = None,
-    quiet: bool = False,
+    reporter: Reporter = STDERR,
 ) -> list[Path]:
     """Write the figures of the module docstring for model `bundle` on `split` of dataset `data` into
     `plots_dir` (created if needed); return the files written. Figures that cannot be drawn (no text
-    modality, no loss history) are skipped with a note on stderr unless `quiet`."""
+    modality, no loss history) are skipped with a message to `reporter.progress` (default: on stderr)."""
     from facegen.evaluate import prepare  # torch: only when figures are drawn
 
-    say = silent if quiet else say_stderr
     out_dir = Path(plots_dir)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -319,8 +319,8 @@ def write_plots(
         raise FacegenError(f"cannot create the plots folder {out_dir} ({exc.strerror}): choose another "
                            "plots folder", param="plots_dir") from exc
     run = prepare(bundle, data, split, splits=splits, cache_dir=cache_dir, text_model_path=text_model_path,
-                  device=device, quiet=quiet, warn=None)  # evaluate reports them
-    pred = predict_split(run, quiet=quiet)
+                  device=device, reporter=reporter.noting(silent))  # evaluate reports skipped sequences
+    pred = predict_split(run, reporter=reporter)
     name = Path(run.bundle.path).name if run.bundle.path else "default model"
     where = f"split {split} of {run.dataset.root.name}: {len(pred.items)} sequences, {pred.frames} frames"
     written: list[Path] = []
@@ -359,9 +359,9 @@ def write_plots(
 
     # Fig. 4
     if "text" in pred.encoded:
-        written.append(_fig4(run, pred, out_dir / "fig4_tsne.png", name, split, say))
+        written.append(_fig4(run, pred, out_dir / "fig4_tsne.png", name, split, reporter))
     else:
-        say("fig4_tsne.png not drawn: the model has no text encoder (audio only)")
+        reporter.progress("fig4_tsne.png not drawn: the model has no text encoder (audio only)")
 
     # loss curves
     history = run.bundle.provenance.get("history")
@@ -370,12 +370,13 @@ def write_plots(
         title = f"Training of {name} ({len(history)} epochs" + (f", best epoch {best})" if best else ")")
         written.append(plot_loss_curves(history, out_dir / "loss_curves.png", title))
     else:
-        say(f"loss_curves.png not drawn: {name} has no loss history in its provenance (bundles trained "
-            "before facegen 0.1 do not store it; the training's loss.csv is in its checkpoint folder)")
+        reporter.progress(f"loss_curves.png not drawn: {name} has no loss history in its provenance (bundles "
+                          "trained before facegen 0.1 do not store it; the training's loss.csv is in its "
+                          "checkpoint folder)")
     return written
 
 
-def _fig4(run: Run, pred: Predictions, path: Path, name: str, split: str, say) -> Path:
+def _fig4(run: Run, pred: Predictions, path: Path, name: str, split: str, reporter: Reporter) -> Path:
     subject = pred.items[0].subject
     picks = [i for i, it in enumerate(pred.items) if it.subject == subject]
     features = np.concatenate([pred.encoded["text"][i] for i in picks])
@@ -386,7 +387,7 @@ def _fig4(run: Run, pred: Predictions, path: Path, name: str, split: str, say) -
     try:
         words = _words(run.dataset, chosen)
     except Exception as exc:  # noqa: BLE001 - without timings the figure is still useful, unlabelled
-        say(f"no word timings for {chosen.name} ({exc}): fig4 right panel without words")
+        reporter.progress(f"no word timings for {chosen.name} ({exc}): fig4 right panel without words")
         words = []
     owner = word_frames(words, chosen.num_frames, run.bundle.features.fps)
     text = textwrap.shorten(" ".join(w.text for w in words), 110, placeholder=" ...")

@@ -242,6 +242,7 @@ class Reporter:
 SILENT = Reporter()  # says nothing: the library's default
 NOTES = Reporter(note=warn_stderr)  # notes on stderr, no progress: the default where a note must not be lost
 BARS = Reporter(bars=True)  # progress bars only: the default of a long library job (render)
+STDERR = Reporter.stderr()  # the command line's without --quiet: the default of train, evaluate and plots
 
 
 class Terminated(KeyboardInterrupt):

@@ -45,7 +45,7 @@ from facegen.errors import FacegenError
 from facegen.figures import plot_loss_curves
 from facegen.model import FaceModel, ModelConfig
 from facegen.phonetics import PHONES
-from facegen.runtime import Say, progress_bar, say_stderr, select_device, silent, warn_stderr
+from facegen.runtime import STDERR, Reporter, select_device
 from facegen.runtime import threads as thread_limit
 from facegen.train_config import TrainConfig
 from facegen.train_data import Batch, PcaTargets, TrainData, load_train_data, make_batches, pca_targets
@@ -262,8 +262,7 @@ def train(
     cache_dir: str | os.PathLike | None = None,
     text_model_path: str | os.PathLike | None = None,
     on_bad: str = "skip",
-    quiet: bool = False,
-    warn: Say | None = warn_stderr,
+    reporter: Reporter = STDERR,
 ) -> TrainResult:
     """Train the model `config` describes (default: the paper's setup) on the dataset at `data_root`;
     write the best epoch's weights as a bundle to `out_bundle`.
@@ -272,21 +271,21 @@ def train(
     all cores); `resume` continues from the checkpoint in `checkpoint_dir` (default:
     default_checkpoint_dir); `cache_dir` holds the dataset's features (default: the dataset's own);
     `text_model_path` is where the text model's files are; `on_bad` "skip" reports and skips unusable
-    sequences, "fail" stops at the first; `quiet` silences progress, `warn` gets the skipped sequences
-    (None: nothing).
+    sequences, "fail" stops at the first; `reporter` (default: on stderr) gets the progress messages and
+    bars, and the skipped sequences as its notes (Reporter.stderr(quiet=True): notes only).
     """
     config = config or TrainConfig()
     config.check()
-    say = silent if quiet else say_stderr
+    say = reporter.progress
     out_bundle, ckpt_dir = _output_paths(Path(out_bundle), checkpoint_dir)
     dev = select_device(device)
-    data = load_train_data(data_root, config, cache_dir, text_model_path, on_bad, warn or silent, say, quiet)
+    data = load_train_data(data_root, config, cache_dir, text_model_path, on_bad, reporter)
     cfg = ModelConfig(num_vertices=data.mesh.num_vertices, num_speakers=len(config.splits.train_subjects),
                       text_dim=data.backend.dim if data.backend is not None else 0,
                       modalities=config.modalities, fusion=config.fusion,
                       output_basis=config.basis if config.output == "pca" else 0,
                       n_phones=len(PHONES) if config.phones else 0, **config.model_options)
-    basis = pca_targets(config, data, dev, say) if config.output == "pca" else None
+    basis = pca_targets(config, data, dev, reporter) if config.output == "pca" else None
     signature = {
         "model_config": cfg.to_dict(), "feature_config": data.features.to_dict(),
         "text_backend": data.backend.id if data.backend is not None else "none",
@@ -296,7 +295,7 @@ def train(
         **({"upper_weight": config.upper_weight} if config.upper_weight else {}),
     }
     with torch_settings(threads):
-        run = _Run(config, cfg, data, basis, dev, ckpt_dir, say)
+        run = _Run(config, cfg, data, basis, dev, ckpt_dir, reporter)
         if resume:
             run.resume(signature)
         try:
@@ -307,7 +306,7 @@ def train(
         train_batches, val_batches = make_batches(data, config, basis, dev)
         say(f"training {config.modalities} ({config.fusion}) on {len(train_batches)} sequences, validating "
             f"on {len(val_batches)}, {config.epochs} epochs, device {dev}")
-        seconds = run.epochs(train_batches, val_batches, basis, signature, quiet)
+        seconds = run.epochs(train_batches, val_batches, basis, signature)
         csv_path, png_path = write_curves(run.history, ckpt_dir)
         run.model.load_state_dict(run.best_state)
         history, best_epoch, best_loss = run.history, run.best_epoch, run.best_loss
@@ -352,8 +351,8 @@ class _Run:
     the best epoch's weights), with the steps that move it on: resume, epochs."""
 
     def __init__(self, config: TrainConfig, cfg: ModelConfig, data: TrainData, basis: PcaTargets | None,
-                 dev: torch.device, ckpt_dir: Path, say: Say) -> None:
-        self.config, self.ckpt_dir, self.say = config, ckpt_dir, say
+                 dev: torch.device, ckpt_dir: Path, reporter: Reporter) -> None:
+        self.config, self.ckpt_dir, self.reporter = config, ckpt_dir, reporter
         torch.manual_seed(config.seed)
         model = FaceModel(cfg)
         if basis is not None:
@@ -372,7 +371,7 @@ class _Run:
 
     def resume(self, signature: dict) -> None:
         """Continue from the checkpoint when there is one made with the same `signature`."""
-        path, lr, say = self.ckpt_dir / CHECKPOINT, self.config.lr, self.say
+        path, lr, say = self.ckpt_dir / CHECKPOINT, self.config.lr, self.reporter.progress
         if not path.is_file():
             say(f"no checkpoint in {self.ckpt_dir}: starting from scratch")
             return
@@ -396,9 +395,9 @@ class _Run:
         say(f"resuming after epoch {self.done} from {path}")
 
     def epochs(self, train_batches: list[Batch], val_batches: list[Batch], basis: PcaTargets | None,
-               signature: dict, quiet: bool) -> float:
+               signature: dict) -> float:
         """Run the epochs left (a checkpoint and the curves after each); the training time in total (s)."""
-        config, ckpt_dir, say = self.config, self.ckpt_dir, self.say
+        config, ckpt_dir, say = self.config, self.ckpt_dir, self.reporter.progress
         run_start = last_png = time.perf_counter()
         for epoch in range(self.done, config.epochs):
             if config.patience is not None and self.best_epoch and epoch - self.best_epoch >= config.patience:
@@ -406,8 +405,8 @@ class _Run:
                 break
             t0 = time.perf_counter()
             order = epoch_order(config.seed, epoch, len(train_batches))
-            bar = progress_bar(total=len(order), desc=f"epoch {epoch + 1}/{config.epochs}", unit="seq",
-                               enabled=not quiet, leave=False)
+            bar = self.reporter.bar(total=len(order), desc=f"epoch {epoch + 1}/{config.epochs}", unit="seq",
+                                    leave=False)
             try:
                 train_loss = train_epoch(self.model, self.optimizer, train_batches, order, config.batch_size,
                                          bar, basis.loss if basis is not None else None)

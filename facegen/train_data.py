@@ -20,7 +20,7 @@ from facegen.datasets.biwi import Dataset, Item
 from facegen.datasets.cache import BadSequence
 from facegen.errors import FacegenError
 from facegen.model import FaceModel, one_hot
-from facegen.runtime import Say
+from facegen.runtime import Reporter
 from facegen.train_config import TrainConfig
 
 if TYPE_CHECKING:  # imported where used: an audio-only model needs no text model, a full output no basis
@@ -84,10 +84,10 @@ class TrainData:
 
 
 def load_train_data(data_root: str | os.PathLike, config: TrainConfig, cache_dir: str | os.PathLike | None,
-                    text_model_path: str | os.PathLike | None, on_bad: str, warn: Say, say: Say,
-                    quiet: bool) -> TrainData:
-    """Read the split's sequences and their features (computed once, cached in the dataset's cache folder)."""
-    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, warn=warn)
+                    text_model_path: str | os.PathLike | None, on_bad: str, reporter: Reporter) -> TrainData:
+    """Read the split's sequences and their features (computed once, cached in the dataset's cache folder);
+    `reporter` hears of the skipped sequences (its notes) and draws the bars."""
+    dataset = Dataset(data_root, cache_dir=cache_dir, on_bad=on_bad, reporter=reporter)
     features = FeatureConfig()
     filters = mel_filters(features)
     backend = None
@@ -98,9 +98,9 @@ def load_train_data(data_root: str | os.PathLike, config: TrainConfig, cache_dir
     seqs = [dataset.split(split, config.splits) for split in ("train", "val")]
     if config.max_sequences is not None:
         seqs = [round_robin(s, lambda seq: seq.subject)[:config.max_sequences] for s in seqs]
-    say(f"features of {len(seqs[0])} training and {len(seqs[1])} validation sequences "
-        f"(cached in {dataset.cache_dir})")
-    train_items, val_items = (dataset.load(s, features, filters, backend, progress=not quiet) for s in seqs)
+    reporter.progress(f"features of {len(seqs[0])} training and {len(seqs[1])} validation sequences "
+                      f"(cached in {dataset.cache_dir})")
+    train_items, val_items = (dataset.load(s, features, filters, backend) for s in seqs)
     if not train_items:
         raise FacegenError(f"no usable training sequence in {dataset.root} for subjects "
                            f"{' '.join(config.splits.train_subjects)}: check the files named above and the "
@@ -124,13 +124,13 @@ class PcaTargets:
     val_loss: CoefficientLoss  # the plain MSE in the basis (validation)
 
 
-def pca_targets(config: TrainConfig, data: TrainData, dev: torch.device, say: Say) -> PcaTargets:
+def pca_targets(config: TrainConfig, data: TrainData, dev: torch.device, reporter: Reporter) -> PcaTargets:
     """Fit the basis (output "pca") and project every item onto it (cached by the basis's digest)."""
     from facegen.motion_basis import CoefficientLoss, basis_digest, fit_basis, project
 
-    say(f"PCA basis of the training motion ({config.basis} directions)")
+    reporter.progress(f"PCA basis of the training motion ({config.basis} directions)")
     pca, mean, kept = fit_basis(data.train, config.basis, seed=config.seed)
-    say(f"the basis keeps {100 * kept:.3f} % of the training motion's variance")
+    reporter.progress(f"the basis keeps {100 * kept:.3f} % of the training motion's variance")
     folder = data.dataset.cache_dir / f"coefficients-{basis_digest(pca, mean)}"
     folder.mkdir(parents=True, exist_ok=True)
     coefficients = {}

@@ -22,6 +22,7 @@ from facegen.datasets.splits import Splits, parse_numbers
 from facegen.datasets.templates import read_templates_pkl, write_templates_pkl
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
+from facegen.runtime import SILENT, Reporter
 
 FPS = 25
 SR = 16000
@@ -108,7 +109,7 @@ def test_malicious_templates_pkl_is_refused_without_running(tmp_path):
 
 
 def test_dataset_parts(toy):
-    ds = Dataset(toy, warn=None)
+    ds = Dataset(toy, reporter=SILENT)
     assert sorted(ds.templates) == ["F1", "F2", "F3"] and ds.template("F2").shape == (200, 3)
     assert ds.mesh.num_vertices == 200 and set(ds.mesh.regions) == {"lips", "upper_face"}
     assert (toy / "regions" / "lve.txt").is_file() and (toy / "regions" / "fdd.txt").is_file()
@@ -123,7 +124,7 @@ def test_templates_folder_wins_over_pkl(tmp_path):
     (root / "templates").mkdir()
     np.save(root / "templates" / "F2.npy", np.full((200, 3), 0.5, np.float32))
     np.save(root / "templates" / "M9.npy", np.zeros(600, np.float32))  # flat [3V] is accepted too
-    ds = Dataset(root, warn=None)
+    ds = Dataset(root, reporter=SILENT)
     assert ds.template("F2")[0, 0] == 0.5 and ds.template("M9").shape == (200, 3)
     with pytest.raises(FacegenError, match="no template for subject F7"):
         ds.template("F7")
@@ -132,7 +133,7 @@ def test_templates_folder_wins_over_pkl(tmp_path):
 def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     feats = FeatureConfig()
     filters = mel_filters(feats)
-    ds = Dataset(toy, cache_dir=toy / "cache1", warn=None)
+    ds = Dataset(toy, cache_dir=toy / "cache1", reporter=SILENT)
     seqs = ds.split("train", TOY_SPLITS)[:3]
     items = ds.load(seqs, feats, filters, gpt2_backend)
     assert [it.name for it in items] == ["F2_e01", "F2_e02", "F2_e03"]
@@ -149,7 +150,7 @@ def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     assert sum(".mel-" in n for n in cached) == 3 and sum(".text-" in n for n in cached) == 3
     stamps = {p: p.stat().st_mtime_ns for p in (toy / "cache1" / "features").iterdir()}
 
-    again = Dataset(toy, cache_dir=toy / "cache1", warn=None).load(seqs, feats, filters, gpt2_backend)
+    again = Dataset(toy, cache_dir=toy / "cache1", reporter=SILENT).load(seqs, feats, filters, gpt2_backend)
     np.testing.assert_array_equal(again[1].mel, items[1].mel)
     np.testing.assert_array_equal(again[1].text, items[1].text)
     # read, not redone
@@ -158,10 +159,10 @@ def test_features_are_computed_once_and_cached(toy, gpt2_backend):
     # a changed wav file is noticed (size/mtime in the key): its mel is recomputed into a new entry
     wav = toy / "wav" / "F2_e01.wav"
     os.utime(wav, ns=(wav.stat().st_atime_ns, wav.stat().st_mtime_ns + 10**9))
-    Dataset(toy, cache_dir=toy / "cache1", warn=None).load(seqs[:1], feats, filters, gpt2_backend)
+    Dataset(toy, cache_dir=toy / "cache1", reporter=SILENT).load(seqs[:1], feats, filters, gpt2_backend)
     assert sum(".mel-" in p.name for p in (toy / "cache1" / "features").iterdir()) == 4
     # audio-only loading needs no text backend and no transcript
-    audio_only = Dataset(toy, cache_dir=toy / "cache1", warn=None).load(seqs, feats, filters, None)
+    audio_only = Dataset(toy, cache_dir=toy / "cache1", reporter=SILENT).load(seqs, feats, filters, None)
     assert audio_only[0].text is None
 
 
@@ -179,7 +180,7 @@ def _corrupt_copy(tmp_path: Path) -> Path:
 def test_bad_sequences_are_reported_by_name_and_skipped(tmp_path):
     root = _corrupt_copy(tmp_path)
     messages: list[str] = []
-    ds = Dataset(root, warn=messages.append)
+    ds = Dataset(root, reporter=Reporter(note=messages.append))
     seqs = ds.split("train", TOY_SPLITS)
     feats = FeatureConfig()
     items = ds.load(seqs, feats, mel_filters(feats))
@@ -191,16 +192,16 @@ def test_bad_sequences_are_reported_by_name_and_skipped(tmp_path):
     assert "NaN" in reasons["F3_e03"] and "F3_e04.wav is not readable audio" in reasons["F3_e04"]
     assert len(messages) == 4 and all(m.startswith("skipping sequence") for m in messages)
     with pytest.raises(FacegenError, match="sequence F3_e01: wav/F3_e01.wav missing"):
-        Dataset(root, on_bad="fail", warn=None).split("train", TOY_SPLITS)
+        Dataset(root, on_bad="fail", reporter=SILENT).split("train", TOY_SPLITS)
     with pytest.raises(FacegenError, match="sequence F2_e02"):
-        ds2 = Dataset(root, on_bad="fail", warn=None)
+        ds2 = Dataset(root, on_bad="fail", reporter=SILENT)
         ds2.load(ds2.sequences(["F2_e01", "F2_e02"]), feats, mel_filters(feats))
 
 
 def test_text_needs_a_transcript_or_alignment(tmp_path, gpt2_backend):
     root = make_dataset(tmp_path / "d", subjects=("F2",), sentences=[1, 2], with_alignments=False,
                         with_text=False)
-    ds = Dataset(root, warn=None)
+    ds = Dataset(root, reporter=SILENT)
     feats = FeatureConfig()
     assert ds.load(ds.sequences(["F2_e01", "F2_e02"]), feats, mel_filters(feats), gpt2_backend) == []
     assert "no transcript text/F2_e01.txt" in dict(ds.skipped)["F2_e01"]
@@ -209,7 +210,7 @@ def test_text_needs_a_transcript_or_alignment(tmp_path, gpt2_backend):
 def test_vertex_count_mismatch_is_a_named_error(tmp_path):
     root = make_dataset(tmp_path / "d", subjects=("F2",), sentences=[1, 2], with_alignments=False)
     np.save(root / "vertices_npy" / "F2_e02.npy", np.zeros((20, 3 * 199), np.float32))
-    ds = Dataset(root, warn=None)
+    ds = Dataset(root, reporter=SILENT)
     feats = FeatureConfig()
     with pytest.raises(FacegenError, match=r"F2_e02.npy has 199 vertices per frame but the template of F2 "
                                            r"has 200"):
@@ -220,12 +221,12 @@ def test_audio_and_motion_lengths_must_roughly_agree(tmp_path):
     root = make_dataset(tmp_path / "d", subjects=("F2",), sentences=[1], with_alignments=False)
     v = np.load(root / "vertices_npy" / "F2_e01.npy")
     np.save(root / "vertices_npy" / "F2_e01.npy", np.concatenate([v, v, v]))  # 3x as long as the audio
-    ds = Dataset(root, warn=None)
+    ds = Dataset(root, reporter=SILENT)
     feats = FeatureConfig()
     assert ds.load(ds.sequences(["F2_e01"]), feats, mel_filters(feats)) == []
     assert "the audio lasts 27 frames but the motion 81 frames" in ds.skipped[0][1]
     np.save(root / "vertices_npy" / "F2_e01.npy", v[:-2])  # two frames short: truncated to the shorter
-    item = Dataset(root, cache_dir=tmp_path / "c2", warn=None).load(ds.sequences(["F2_e01"]), feats,
+    item = Dataset(root, cache_dir=tmp_path / "c2", reporter=SILENT).load(ds.sequences(["F2_e01"]), feats,
                                                                     mel_filters(feats))[0]
     assert item.num_frames == 25 and item.mel.shape[0] == 25
 
@@ -238,7 +239,7 @@ def test_missing_dataset_parts_are_explained(tmp_path):
         Dataset(tmp_path / "d")
     (tmp_path / "d" / "vertices_npy").mkdir()
     with pytest.raises(FacegenError, match="BIWI.ply is missing"):
-        Dataset(tmp_path / "d", warn=None).mesh  # noqa: B018
+        Dataset(tmp_path / "d", reporter=SILENT).mesh  # noqa: B018
 
 
 def test_transcripts_are_aligned_once_and_cached(tmp_path, gpt2_backend, monkeypatch):
@@ -252,7 +253,7 @@ def test_transcripts_are_aligned_once_and_cached(tmp_path, gpt2_backend, monkeyp
     frames = round(speech.duration * FPS)
     writer.write_sequence("F2_e01", np.repeat(mesh.vertices[None], frames, 0), audio=speech.audio,
                           sample_rate=speech.sample_rate, transcript="Please open the window.")
-    ds = Dataset(tmp_path / "d", warn=None)
+    ds = Dataset(tmp_path / "d", reporter=SILENT)
     seq = ds.sequences(["F2_e01"])[0]
     words = ds.words(seq, speech.audio, speech.sample_rate)
     assert [w.text for w in words] == ["Please", "open", "the", "window"]
@@ -360,7 +361,7 @@ def test_import_biwi_writes_the_community_layout(raw_biwi, tmp_path):
     messages: list[str] = []
     out = tmp_path / "BIWI"
     report = import_biwi(raw_biwi, out, transcripts=raw_biwi / "sentences.txt", regions=raw_biwi / "regions",
-                         warn=messages.append)
+                         reporter=Reporter(note=messages.append))
     assert report.subjects == ["F2", "F3"] and report.sequences == ["F2_e01", "F2_e02", "F3_e01"]
     assert report.neutral_ignored == 1 and [n for n, _ in report.skipped] == ["F3_e02"]
     assert "videos/F3_e02.flv" in report.skipped[0][1] and any("F3_e02" in m for m in messages)
@@ -394,7 +395,7 @@ def test_import_biwi_writes_the_community_layout(raw_biwi, tmp_path):
     assert (out / "text" / "F2_e01.txt").read_text().strip() == "Open the window."
     assert (out / "text" / "F3_e01.txt").read_text().strip() == "Open the window."
     assert (out / "regions" / "lve.txt").read_text().startswith("0, 1, 2")
-    ds = Dataset(out, warn=None)
+    ds = Dataset(out, reporter=SILENT)
     assert ds.mesh.num_vertices == 200 and np.array_equal(ds.mesh.faces, base.faces)
     assert len(ds.mesh.regions["lips"]) == 60
     np.testing.assert_allclose(ds.mesh.vertices, (templates["F2"] + templates["F3"]) / 2, atol=1e-5)
@@ -420,7 +421,7 @@ def test_import_biwi_template_normalisation(raw_biwi, tmp_path):
     texts.mkdir()
     (texts / "e01.txt").write_text("Open the window.")
     (texts / "F2_e02.txt").write_text("Only for F2.")
-    import_biwi(raw_biwi, out, normalisation="template", subjects=["F2"], transcripts=texts, warn=None)
+    import_biwi(raw_biwi, out, normalisation="template", subjects=["F2"], transcripts=texts, reporter=SILENT)
     assert (out / "text" / "F2_e01.txt").read_text().strip() == "Open the window."
     assert (out / "text" / "F2_e02.txt").read_text().strip() == "Only for F2."
     assert sorted(read_templates_pkl(out / "templates.pkl")) == ["F2"]
@@ -455,10 +456,10 @@ def test_failed_import_leaves_no_folder(tmp_path):
     (raw / "videos" / "F2_e01.wav").write_bytes(b"RIFF")
     out = tmp_path / "dataset"
     with pytest.raises(FacegenError, match="no sequence of .* could be imported"):
-        import_biwi(raw, out, warn=None)
+        import_biwi(raw, out, reporter=SILENT)
     assert not out.exists()
     out.mkdir()
     (out / "mine.txt").write_text("kept")
     with pytest.raises(FacegenError):
-        import_biwi(raw, out, warn=None)
+        import_biwi(raw, out, reporter=SILENT)
     assert (out / "mine.txt").read_text() == "kept"  # a folder that had files keeps them

@@ -13,6 +13,7 @@ from helpers import TOY_SPLITS, grid_face, make_bundle, make_dataset
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.evaluate import evaluate, format_table, pool, sequence_metrics
+from facegen.runtime import SILENT, Reporter
 
 
 def test_metrics_by_hand():
@@ -110,14 +111,14 @@ def test_evaluate_test_a_uses_each_sequence_own_speaker(toy, bundle_path):
     from facegen.datasets.biwi import Dataset
     from facegen.face.mesh import read_region
 
-    result = evaluate(bundle_path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
+    result = evaluate(bundle_path, toy, "test-a", splits=TOY_SPLITS, reporter=SILENT)
     assert result["split"] == "test-a" and result["sequences"] == 4
     assert [r["name"] for r in result["per_sequence"]] == ["F2_e06", "F2_e07", "F3_e06", "F3_e07"]
     assert [r["condition"] for r in result["per_sequence"]] == ["F2", "F2", "F3", "F3"]
     json.dumps(result)  # JSON-ready
     # recompute one sequence by hand: prediction = subject's template + model offsets (speaker F3)
     bundle = load_bundle(bundle_path)
-    ds = Dataset(toy, warn=None)
+    ds = Dataset(toy, reporter=SILENT)
     item = ds.load(ds.sequences(["F3_e07"]), bundle.features, bundle.mel_filters)[0]
     with torch.inference_mode():
         off = bundle.model(torch.from_numpy(item.mel)[None], None, torch.tensor([[0.0, 1.0]]))[0].numpy()
@@ -136,12 +137,12 @@ def test_evaluate_test_b_averages_over_every_training_speaker(toy, bundle_path):
     from facegen.datasets.biwi import Dataset
     from facegen.face.mesh import read_region
 
-    result = evaluate(bundle_path, toy, "test-b", splits=TOY_SPLITS, quiet=True, warn=None)
+    result = evaluate(bundle_path, toy, "test-b", splits=TOY_SPLITS, reporter=SILENT)
     assert [r["name"] for r in result["per_sequence"]] == ["F1_e06", "F1_e07"]
     assert result["per_sequence"][0]["condition"] == "mean of 2 speakers"
     assert "each of the 2 training speakers" in result["conditioning"]
     bundle = load_bundle(bundle_path)
-    ds = Dataset(toy, warn=None)
+    ds = Dataset(toy, reporter=SILENT)
     items = ds.load(ds.sequences(["F1_e06", "F1_e07"]), bundle.features, bundle.mel_filters)
     lips, upper = read_region(toy / "regions" / "lve.txt"), read_region(toy / "regions" / "fdd.txt")
     rows = []
@@ -162,12 +163,12 @@ def test_evaluate_test_b_averages_over_every_training_speaker(toy, bundle_path):
 def test_a_zero_model_scores_the_motion_itself(toy, tmp_path):
     path = tmp_path / "zero.safetensors"
     make_bundle(grid_face(), path, speakers=("F2", "F3"), modalities="audio", scale=0.0)
-    result = evaluate(path, toy, "val", splits=TOY_SPLITS, quiet=True, warn=None)
+    result = evaluate(path, toy, "val", splits=TOY_SPLITS, reporter=SILENT)
     # predicting the template: LVE = mean over frames of the max lip displacement squared; the data's
     # lips move down by 0.04 * (1 + 0.2 k) * envelope; FDD = the truth's own upper-face dynamics (>= 0)
     from facegen.datasets.biwi import Dataset
 
-    ds = Dataset(toy, warn=None)
+    ds = Dataset(toy, reporter=SILENT)
     lve = []
     for name in ("F2_e05", "F3_e05"):
         v = np.load(toy / "vertices_npy" / f"{name}.npy").reshape(-1, 200, 3)
@@ -179,19 +180,19 @@ def test_a_zero_model_scores_the_motion_itself(toy, tmp_path):
 
 def test_evaluate_refuses_mismatches(toy, bundle_path, tmp_path):
     with pytest.raises(FacegenError, match="subjects F1 of split test-a are not speakers"):
-        evaluate(bundle_path, toy, "test-a", quiet=True,
+        evaluate(bundle_path, toy, "test-a", reporter=Reporter.stderr(quiet=True),
                  splits=Splits(train_subjects=("F1",), test_subjects=(), train_sentences="1-4",
                                val_sentences="5", test_sentences="6-7"))
     with pytest.raises(FacegenError, match="unknown split"):
-        evaluate(bundle_path, toy, "test", quiet=True)
+        evaluate(bundle_path, toy, "test", reporter=Reporter.stderr(quiet=True))
     other = make_bundle(grid_face(8, 5), tmp_path / "small.safetensors", speakers=("F2", "F3"),
                         modalities="audio")
     with pytest.raises(FacegenError, match="have 200 vertices but the model 40"):
-        evaluate(other.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
+        evaluate(other.path, toy, "test-a", splits=TOY_SPLITS, reporter=SILENT)
     narrow = make_bundle(grid_face(), tmp_path / "narrow.safetensors", speakers=("F2", "F3"), text_dim=100)
     with pytest.raises(FacegenError, match=r"gives 384-d features but the model was trained on 100-d "
                                            r"\(minilm\)"):
-        evaluate(narrow.path, toy, "test-a", splits=TOY_SPLITS, quiet=True, warn=None)
+        evaluate(narrow.path, toy, "test-a", splits=TOY_SPLITS, reporter=SILENT)
 
 
 def test_metrics_on_the_real_biwi_topology(biwi_template):

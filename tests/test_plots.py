@@ -19,6 +19,7 @@ from facegen.plots import (
     word_frames,
     write_plots,
 )
+from facegen.runtime import SILENT
 from facegen.words import Word
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -124,7 +125,7 @@ def test_write_plots_draws_the_three_figures(trained, tmp_path):
     assert history[1]["val_loss"] == pytest.approx(result.history[1]["val_loss"], rel=1e-5)
 
     folder = tmp_path / "plots"
-    written = write_plots(bundle_path, toy, folder, split="test-a", splits=TOY_SPLITS, quiet=True)
+    written = write_plots(bundle_path, toy, folder, split="test-a", splits=TOY_SPLITS, reporter=SILENT)
     names = sorted(p.name for p in written)
     assert names == ["fig3_correlation.json", "fig3_correlation.png", "fig4_tsne.png", "loss_curves.png"]
     assert sorted(p.name for p in folder.iterdir()) == names  # nothing else (no temporary files)

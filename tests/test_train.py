@@ -16,7 +16,7 @@ from safetensors import safe_open
 from facegen.bundle import load_bundle, read_metadata
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
-from facegen.runtime import select_device
+from facegen.runtime import SILENT, select_device
 from facegen.train import CHECKPOINT, default_checkpoint_dir, epoch_order
 
 
@@ -134,7 +134,7 @@ def test_bad_setups_are_refused(toy, tmp_path):
         train_toy(toy, tmp_path / "no" / "m.safetensors")
     with pytest.raises(FacegenError, match="no usable training sequence"):
         train_toy(toy, tmp_path / "m.safetensors", splits=Splits(train_subjects=("M9",), test_subjects=()),
-               warn=None)
+               reporter=SILENT)
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")

@@ -12,6 +12,7 @@ from facegen.audio import FeatureConfig, load_audio, mel_filters
 from facegen.datasets.biwi import Dataset
 from facegen.errors import FacegenError
 from facegen.lipsync import FaceGeometry, aperture, bilabial_midpoints
+from facegen.runtime import SILENT
 from facegen.synth import voice_corpus as vc
 from facegen.synth.voices import available_voices
 
@@ -66,7 +67,7 @@ def test_sequences_are_complete_and_consistent(corpus):
 
 def test_the_reader_poses_the_curves_and_bilabials_close_the_lips(corpus):
     out, manifest = corpus
-    ds = Dataset(out, warn=None)
+    ds = Dataset(out, reporter=SILENT)
     seqs = ds.sequences(sorted(manifest["done"]))
     assert len(seqs) == len(manifest["done"]) and all(s.curves is not None for s in seqs)
     feats = FeatureConfig()
@@ -121,8 +122,8 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
              "lstm_dim": 16}
     config = TrainConfig(modalities="audio", epochs=2, splits=splits, model_options=small, output="pca",
                          basis=8, phones=True)
-    result = train(out, tmp_path / "phones.safetensors", config, device="cpu", quiet=True, threads=1,
-                   warn=None)
+    result = train(out, tmp_path / "phones.safetensors", config, device="cpu", threads=1,
+                   reporter=SILENT)
     assert result.train_sequences == 3
     from facegen.bundle import load_bundle
 

@@ -7,6 +7,7 @@ import click
 from facegen.cli.command import Command
 from facegen.cli.options import FPS, progress
 from facegen.errors import FacegenError
+from facegen.runtime import Reporter
 
 
 @click.group()
@@ -30,7 +31,7 @@ def import_biwi(raw, out, transcripts, regions, subjects, quiet):
     from facegen.datasets.raw import import_biwi as run
 
     report = run(raw, out, transcripts=transcripts, regions=regions,
-                 subjects=subjects.split(",") if subjects else None, progress=not quiet)
+                 subjects=subjects.split(",") if subjects else None, reporter=Reporter.stderr(quiet))
     click.echo(report.summary())
 
 

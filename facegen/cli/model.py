@@ -10,6 +10,7 @@ import click
 from facegen.cli.command import Command
 from facegen.cli.options import DEVICE, WEIGHT, FiniteRange, split_options, splits
 from facegen.model_config import FUSIONS, MODALITIES
+from facegen.runtime import Reporter
 from facegen.train_config import OUTPUT_LAYERS, TrainConfig
 
 
@@ -105,7 +106,7 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
                          phones=phones)
     result = run(data, output, config, device=device, threads=threads, resume=resume,
                  checkpoint_dir=checkpoint_dir, text_model_path=text_model,
-                 on_bad="fail" if strict else "skip", quiet=quiet)
+                 on_bad="fail" if strict else "skip", reporter=Reporter.stderr(quiet))
     click.echo(json.dumps({"bundle": str(result.bundle), "epochs": result.epochs,
                            "best_epoch": result.best_epoch, "best_loss": result.best_loss,
                            "seconds": round(result.seconds, 1),
@@ -131,14 +132,15 @@ def evaluate(bundle, data, split, text_model, device, train_subjects, test_subje
     from facegen.evaluate import evaluate as run
     from facegen.evaluate import format_table
 
+    reporter = Reporter.stderr(quiet)
     given = (train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
     chosen = splits(*given) if any(v is not None for v in given) else None
     result = run(bundle, data, split, splits=chosen, text_model_path=text_model, device=device,
-                 on_bad="fail" if strict else "skip", quiet=quiet)
+                 on_bad="fail" if strict else "skip", reporter=reporter)
     click.echo(json.dumps(result, indent=1) if as_json else format_table(result))
     if plots:
         from facegen.plots import write_plots
 
         for path in write_plots(bundle, data, plots, split=split, splits=chosen, text_model_path=text_model,
-                                device=device, quiet=quiet):
+                                device=device, reporter=reporter):
             click.echo(f"facegen: wrote {path}", err=True)

@@ -24,7 +24,8 @@ regions/<name>.txt keeps its name.
 
 A sequence whose files are missing or unreadable is reported by name and skipped (`on_bad="skip"`,
 the default) or stops the run (`on_bad="fail"`); a vertex file whose vertex count differs from its
-subject's template is always an error.
+subject's template is always an error. A Dataset's `reporter` (default: notes on stderr) hears of every
+skipped sequence (its notes) and draws a bar while features are computed (when it draws bars).
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ from facegen.datasets.templates import as_vertices, read_templates_pkl, write_te
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, read_mesh, read_region, write_mesh, write_region
 from facegen.face.regions import COMMUNITY_FILES, file_stem, region_name
-from facegen.runtime import Say, progress_bar, silent, warn_stderr
+from facegen.runtime import NOTES, SILENT, Reporter
 
 ALIGNMENT_SUFFIXES = (".json", ".textgrid", ".csv")
 LENGTH_RATIO = 0.8  # audio and motion shorter than this fraction of each other: the sequence is corrupt
@@ -114,7 +115,7 @@ class Dataset:
     """A dataset folder in the community layout (see the module docstring)."""
 
     def __init__(self, root: str | os.PathLike, *, cache_dir: str | os.PathLike | None = None,
-                 on_bad: str = "skip", warn: Say | None = warn_stderr) -> None:
+                 on_bad: str = "skip", reporter: Reporter = NOTES) -> None:
         self.root = Path(root)
         if not self.root.is_dir():
             raise FacegenError(f"dataset folder {self.root} does not exist: pass a folder with wav/ and "
@@ -127,7 +128,7 @@ class Dataset:
         if on_bad not in ("skip", "fail"):
             raise ValueError(f"on_bad must be 'skip' or 'fail', not {on_bad!r}")
         self.on_bad = on_bad
-        self.warn = warn or silent
+        self.reporter = reporter
         self.cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir(self.root)
         try:
             self.cache_dir.mkdir(parents=True, exist_ok=True)
@@ -197,7 +198,7 @@ class Dataset:
         if self.on_bad == "fail":
             raise FacegenError(f"sequence {name}: {reason} (fix or remove it, or skip bad sequences)")
         self.skipped.append((name, reason))
-        self.warn(f"skipping sequence {name}: {reason}")
+        self.reporter.note(f"skipping sequence {name}: {reason}")
 
     def sequence(self, name: str) -> Sequence:
         subject = name.split("_")[0]
@@ -367,12 +368,13 @@ class Dataset:
         return words
 
     def load(self, sequences: SequenceABC[Sequence], features: FeatureConfig, filters: np.ndarray,
-             backend=None, progress: bool = False) -> list[Item]:
-        """Features of every usable sequence (from the cache when it has them); bad ones reported."""
+             backend=None) -> list[Item]:
+        """Features of every usable sequence (from the cache when it has them); bad ones reported. A bar is
+        drawn when the dataset's reporter draws bars."""
         cache = FeatureCache(self.cache_dir, features, filters, backend)
         items = []
-        bar = progress_bar(sequences, desc="features", unit="seq", enabled=progress and bool(sequences),
-                           leave=False)
+        reporter = self.reporter if sequences else SILENT
+        bar = reporter.bar(sequences, desc="features", unit="seq", leave=False)
         try:
             for seq in bar:
                 item = self._load_one(seq, cache)

@@ -21,7 +21,7 @@ from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, read_mesh, read_region, surface_area, unit_area
 from facegen.face.regions import COMMUNITY_FILES
 from facegen.processes import run_tool
-from facegen.runtime import Say, progress_bar, silent, warn_stderr
+from facegen.runtime import NOTES, Reporter
 
 ROTATE_X_PI = np.array([[1.0, 0.0, 0.0],  # the community's rotx for theta = pi (applied as V @ rotx)
                         [0.0, np.cos(np.pi), -np.sin(np.pi)],
@@ -193,8 +193,8 @@ def read_transcripts(path: str | os.PathLike) -> dict[int | str, str]:
 
 def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation: str = "frame",
                 transcripts: str | os.PathLike | None = None, regions: str | os.PathLike | None = None,
-                subjects: Iterable[str] | None = None, sample_rate: int = 44100, progress: bool = False,
-                warn: Say | None = warn_stderr) -> ImportReport:
+                subjects: Iterable[str] | None = None, sample_rate: int = 44100,
+                reporter: Reporter = NOTES) -> ImportReport:
     """Convert the raw BIWI release (no MATLAB) into the community layout in `out`.
 
     Reads RAW/rigid_scans/<subj>.obj (templates), RAW/faces/<subj>/<take>.tar|.tgz|.tar.gz or
@@ -216,10 +216,12 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
     Also writes templates.pkl, BIWI.ply (the mean of the normalised templates, with their face list),
     text/<name>.txt from `transcripts` (a file or folder, see read_transcripts), and copies lve.txt and
     fdd.txt from `regions` (a folder, e.g. CodeTalker's BIWI/regions) into regions/.
+
+    `reporter`: a progress bar over the takes when it draws bars; skipped takes and a missing `regions` are
+    its notes (default: on stderr).
     """
 
     raw, out = Path(raw), Path(out)
-    warn = warn or silent
     if normalisation not in NORMALISATIONS:
         raise FacegenError(f"unknown normalisation {normalisation!r}: choose one of "
                            f"{', '.join(NORMALISATIONS)}")
@@ -268,12 +270,12 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
                                    "of the mesh: pass the region files of this topology")
             region_idx[region] = idx
     else:
-        warn("no --regions given: copy lve.txt and fdd.txt into regions/ before evaluating "
-             "(LVE and FDD need them)")
+        reporter.note("no --regions given: copy lve.txt and fdd.txt into regions/ before evaluating "
+                      "(LVE and FDD need them)")
     fresh = not out.exists() or (out.is_dir() and not any(out.iterdir()))
     try:
         return _import_takes(raw, out, meshes, templates, faces, references, region_idx, normalisation,
-                             sentences_text, sample_rate, progress, warn)
+                             sentences_text, sample_rate, reporter)
     except BaseException:
         if fresh and out.is_dir():  # nothing half-imported is left: the folder was new (or empty)
             shutil.rmtree(out, ignore_errors=True)
@@ -282,8 +284,7 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
 
 def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np.ndarray, references: dict,
                   region_idx: dict, normalisation: str, sentences_text: dict, sample_rate: int,
-                  progress: bool,
-                  warn: Say) -> ImportReport:
+                  reporter: Reporter) -> ImportReport:
     """The writing half of import_biwi (its inputs checked)."""
     first = next(iter(meshes.values()))
     writer = DatasetWriter(out)
@@ -298,7 +299,7 @@ def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np
     for subject in sorted(meshes):
         folder = raw / "faces" / subject
         if not folder.is_dir():
-            warn(f"no faces/{subject} folder: subject {subject} has a template but no sequences")
+            reporter.note(f"no faces/{subject} folder: subject {subject} has a template but no sequences")
             continue
         by_take: dict[int, list[Path]] = {}
         for entry in sorted(folder.iterdir()):
@@ -317,7 +318,7 @@ def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np
             entries.sort(key=lambda e: 0 if e.is_dir() else 1 if e.suffix.lower() == ".tar" else 2)
             takes.append((subject, number, entries))
 
-    bar = progress_bar(takes, desc="import", unit="seq", enabled=progress)
+    bar = reporter.bar(takes, desc="import", unit="seq")
     for subject, number, entries in bar:
         name = sequence_name(subject, number)
         try:
@@ -351,7 +352,7 @@ def _import_takes(raw: Path, out: Path, meshes: dict, templates: dict, faces: np
             report.sequences.append(name)
         except FacegenError as exc:
             report.skipped.append((name, str(exc)))
-            warn(f"skipping {name}: {exc}")
+            reporter.note(f"skipping {name}: {exc}")
     if not report.sequences:
         raise FacegenError(f"no sequence of {raw} could be imported: see the messages above")
     return report
