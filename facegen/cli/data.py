@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from facegen.cli.command import Command
-from facegen.cli.options import FPS, progress
+from facegen.cli.options import FPS
 from facegen.errors import FacegenError
 from facegen.runtime import Reporter
 
@@ -51,6 +51,7 @@ def import_biwi(raw, out, transcripts, regions, subjects, quiet):
 @click.option("--quiet", "-q", is_flag=True)
 def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
     """Generate a synthetic speech-and-motion corpus in OUT (BIWI layout)."""
+    reporter = Reporter.stderr(quiet)
     if preset == "voices":
         from facegen.synth.voice_corpus import FPS as VOICES_FPS
         from facegen.synth.voice_corpus import build
@@ -59,7 +60,7 @@ def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
             raise FacegenError("--subjects, --sentences and --fps do not apply to --preset voices: drop them")
         if workers < 1:
             raise FacegenError(f"--workers {workers} must be at least 1")
-        manifest = build(out, seed=seed, workers=workers, limit=limit, say=progress(quiet))
+        manifest = build(out, seed=seed, workers=workers, limit=limit, reporter=reporter)
         failed = sum("error" in e for e in manifest["done"].values())
         click.echo(f"{len(manifest['done']) - failed} sequences in {out}"
                    + (f" ({failed} failed)" if failed else ""))
@@ -69,5 +70,5 @@ def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
     from facegen.synth.corpus import synthesize_corpus
 
     report = synthesize_corpus(out, subjects, sentences, preset=preset, fps=fps, seed=seed, workers=workers,
-                               progress=not quiet)
+                               reporter=reporter)
     click.echo(report.summary())

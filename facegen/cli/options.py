@@ -11,7 +11,6 @@ from pathlib import Path
 import click
 
 from facegen.errors import FacegenError
-from facegen.runtime import Say, say_stderr, silent
 
 
 class FiniteRange(click.FloatRange):
@@ -27,11 +26,6 @@ class FiniteRange(click.FloatRange):
 FPS = FiniteRange(0, 1000, min_open=True)
 WEIGHT = FiniteRange(0, 1e6)
 DEVICE = click.Choice(["auto", "cpu", "cuda"])
-
-
-def progress(quiet: bool) -> Say:
-    """Where a command's progress messages go: "facegen: ..." lines on stderr, or nowhere with --quiet."""
-    return silent if quiet else say_stderr
 
 
 def protect_inputs(outputs: list, **inputs) -> None:

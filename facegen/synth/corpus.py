@@ -52,7 +52,7 @@ from facegen.atomic import atomic_path
 from facegen.datasets.splits import parse_numbers, parse_subjects, sequence_name
 from facegen.errors import FacegenError
 from facegen.processes import process_pool
-from facegen.runtime import progress_bar, threads
+from facegen.runtime import SILENT, Reporter, threads
 from facegen.synth.sentences import SENTENCES
 
 CORPUS_VERSION = 1  # bump when the face, rig, voices or sentences change what is generated
@@ -212,13 +212,14 @@ def _files(out: Path, name: str) -> list[Path]:
 def synthesize_corpus(out: str | os.PathLike, speakers: str | Iterable[str] | None = None,
                       sentences: str | Iterable[int] | None = None, *, preset: str | None = None,
                       fps: float = 25.0, seed: int = 0, workers: int = 1,
-                      progress: bool = False) -> CorpusReport:
+                      reporter: Reporter = SILENT) -> CorpusReport:
     """Generate the synthetic corpus (or the part asked for) into `out` in the BIWI community layout.
 
     `speakers` ("F2,F3" or names) and `sentences` ("1-40" or numbers) select what to generate (default:
     all 14 speakers × e01–e48); `preset="paper"` instead generates the training speakers' e01–e48 and
     the test-B speakers' e37–e48. Sequences already in the folder's manifest (same parameters) are
-    skipped. `workers` processes generate speakers in parallel. Returns what was done.
+    skipped. `workers` processes generate speakers in parallel (a bar when `reporter` draws bars). Returns
+    what was done.
     """
     if not 0 < fps <= 1000:  # also refuses nan
         raise FacegenError(f"fps {fps} must be a positive number up to 1000, e.g. 25")
@@ -255,7 +256,7 @@ def synthesize_corpus(out: str | os.PathLike, speakers: str | Iterable[str] | No
     _write_static(out, writer, wanted, read_templates_pkl)
     _write_corpus_manifest(out, manifest)
     if total:
-        _run(out, todo, seed, fps, workers, progress, manifest, report)
+        _run(out, todo, seed, fps, workers, reporter, manifest, report)
     report.seconds = time.monotonic() - started
     return report
 
@@ -293,8 +294,8 @@ def _write_static(out: Path, writer, wanted: dict[str, tuple[int, ...]], read_te
         tmp.write_text("".join(f"e{n:02d} {text}\n" for n, text in SENTENCES.items()), encoding="utf-8")
 
 
-def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, workers: int, progress: bool,
-         manifest: dict, report: CorpusReport) -> None:
+def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, workers: int,
+         reporter: Reporter, manifest: dict, report: CorpusReport) -> None:
     """Generate `todo` with one fresh worker process per speaker (`workers` at a time: a spawn pool, a new
     process per task); record each finished sequence in the manifest as the worker reports it."""
     import multiprocessing
@@ -302,7 +303,7 @@ def _run(out: Path, todo: dict[str, tuple[int, ...]], seed: int, fps: float, wor
 
     total = sum(len(v) for v in todo.values())
     order = sorted(todo, key=lambda s: -len(todo[s]))  # longest jobs first
-    bar = progress_bar(total=total, desc="synth", unit="seq", enabled=progress)
+    bar = reporter.bar(total=total, desc="synth", unit="seq")
     messages = multiprocessing.get_context("spawn").Queue()  # (name, info) of each sequence written
 
     def record(name: str, info: dict) -> None:

@@ -28,7 +28,6 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Callable
 from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -38,7 +37,7 @@ import numpy as np
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.processes import process_pool
-from facegen.runtime import set_threads
+from facegen.runtime import SILENT, Reporter, set_threads
 
 VERSION = 1
 MANIFEST = "voices.json"
@@ -195,9 +194,9 @@ def _write_root(out: Path, takes: list[Take]) -> None:
 
 def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, workers: int = 2,
           augmentation: bool = True, limit: int | None = None,
-          say: Callable[[str], None] = lambda _m: None) -> dict:
+          reporter: Reporter = SILENT) -> dict:
     """Make (or resume) the corpus in `out`; returns the manifest. `limit` makes only the first takes of each
-    split (a small corpus for tests and trials)."""
+    split (a small corpus for tests and trials). How far it is goes to `reporter.progress`."""
     import shutil
 
     out = Path(out)
@@ -226,6 +225,7 @@ def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, worke
                            "free: free space or pass fewer sentences")
     if not (out / "BIWI.ply").is_file():
         _write_root(out, takes)
+    say = reporter.progress
     say(f"{len(todo)} of {len(takes)} sequences to make ({need / 1e9:.2f} GB), {workers} workers")
     chunks = [todo[i::max(1, workers * 8)] for i in range(max(1, workers * 8))]
     start, made = time.perf_counter(), 0
