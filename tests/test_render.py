@@ -17,6 +17,7 @@ from facegen.face.mesh import Mesh, write_mesh
 from facegen.render import render, render_animation, render_still
 from facegen.render.overlay import TEXT, compare_overlay
 from facegen.render.raster import BACKGROUND, Renderer, face_colors, frame_cameras, heat_colors
+from facegen.runtime import SILENT
 
 FPS = 25.0
 RATE = 16000
@@ -100,7 +101,7 @@ def test_video_and_audio_streams_last_the_clip(grid_mesh, tmp_path, audio_second
     anim = talking_clip(grid_mesh)
     n = round(audio_seconds * RATE)
     anim.audio = np.pad(anim.audio, (0, max(0, n - len(anim.audio))))[:n]
-    result = render_animation(anim, tmp_path / "clip.mp4", size=SIZE, progress=False)
+    result = render_animation(anim, tmp_path / "clip.mp4", size=SIZE, reporter=SILENT)
     assert result.path.is_file() and (result.width, result.height, result.frames) == (2 * SIZE, SIZE, FRAMES)
     lines = streams(result.path)
     video = [s for s in lines if "Video:" in s]
@@ -121,7 +122,7 @@ def test_video_and_audio_streams_last_the_clip(grid_mesh, tmp_path, audio_second
 
 
 def test_frames_are_shaded_faces_on_the_background(grid_mesh, tmp_path):
-    result = render_animation(talking_clip(grid_mesh), tmp_path / "clip.mp4", size=SIZE, progress=False)
+    result = render_animation(talking_clip(grid_mesh), tmp_path / "clip.mp4", size=SIZE, reporter=SILENT)
     frames = decode_frames(result.path).astype(np.float32)
     assert frames.shape == (FRAMES, SIZE, 2 * SIZE, 3)
     background = np.asarray(BACKGROUND) * 255
@@ -135,7 +136,7 @@ def test_frames_are_shaded_faces_on_the_background(grid_mesh, tmp_path):
 
 
 def test_mouth_pixels_change_between_silent_and_voiced_frames(face, tmp_path):
-    result = render_animation(talking_clip(face), tmp_path / "clip.mp4", size=SIZE, progress=False)
+    result = render_animation(talking_clip(face), tmp_path / "clip.mp4", size=SIZE, reporter=SILENT)
     frames = decode_frames(result.path).astype(np.float32)
     silent, voiced = frames[FRAMES // 2 - 3], frames[FRAMES - 3]
     rows, cols = region_box(face, "lips")
@@ -151,8 +152,8 @@ def test_mouth_pixels_change_between_silent_and_voiced_frames(face, tmp_path):
 def test_compare_is_twice_as_wide_with_the_error_painted_on_b(face, tmp_path):
     a = talking_clip(face)
     b = Animation(np.repeat(face.vertices[None], FRAMES, 0), face.faces, FPS, face.vertices.copy())
-    normal = render_animation(a, tmp_path / "a.mp4", size=SIZE, progress=False)
-    result = render_animation(a, tmp_path / "ab.mp4", size=SIZE, compare=b, progress=False)
+    normal = render_animation(a, tmp_path / "a.mp4", size=SIZE, reporter=SILENT)
+    result = render_animation(a, tmp_path / "ab.mp4", size=SIZE, compare=b, reporter=SILENT)
     assert (result.width, result.height) == (2 * normal.width, normal.height) == (4 * SIZE, SIZE)
     frames = decode_frames(result.path).astype(np.float32)
     assert frames.shape == (FRAMES, SIZE, 4 * SIZE, 3)
@@ -212,30 +213,30 @@ def test_compare_captions_are_text_in_the_title_strips_and_a_colour_bar(size):
 def test_compare_frame_counts_topology_and_fps(grid_mesh, tmp_path):
     a = talking_clip(grid_mesh)
     shorter = Animation(a.vertices[:-2], a.faces, FPS, a.template)
-    result = render_animation(a, tmp_path / "ab.mp4", size=SIZE, compare=shorter, progress=False)
+    result = render_animation(a, tmp_path / "ab.mp4", size=SIZE, compare=shorter, reporter=SILENT)
     assert result.frames == FRAMES - 2 and any("first 18" in n for n in result.notes)
     assert imageio_ffmpeg.count_frames_and_secs(str(result.path))[0] == FRAMES - 2
 
     other = Animation(a.vertices[:, :-1], a.faces[:-2], FPS, a.template[:-1])
     with pytest.raises(FacegenError, match="same mesh topology"):
-        render_animation(a, tmp_path / "x.mp4", size=SIZE, compare=other, progress=False)
+        render_animation(a, tmp_path / "x.mp4", size=SIZE, compare=other, reporter=SILENT)
     flipped = Animation(a.vertices, a.faces[:, ::-1].copy(), FPS, a.template)
     with pytest.raises(FacegenError, match="same mesh topology"):
-        render_animation(a, tmp_path / "x.mp4", size=SIZE, compare=flipped, progress=False)
+        render_animation(a, tmp_path / "x.mp4", size=SIZE, compare=flipped, reporter=SILENT)
     with pytest.raises(FacegenError, match="not the same clip"):
         render_animation(
             a,
             tmp_path / "x.mp4",
             size=SIZE,
             compare=Animation(a.vertices[:5], a.faces, FPS, a.template),
-            progress=False,
+            reporter=SILENT,
         )
     with pytest.raises(FacegenError, match="fps"):
         render_animation(
             a,
             tmp_path / "x.mp4",
             size=SIZE,
-            progress=False,
+            reporter=SILENT,
             compare=Animation(a.vertices, a.faces, 30.0, a.template),
         )
     assert not (tmp_path / "x.mp4").exists()
@@ -248,7 +249,7 @@ def test_render_files_usd_glb_and_npy_with_template(grid_mesh, tmp_path):
     write_animation(anim, tmp_path / "truth.npy", write_audio=False)
     write_mesh(grid_mesh, tmp_path / "face.ply")
     for name in ("clip.usda", "clip.glb"):
-        result = render(tmp_path / name, tmp_path / f"{name}.mp4", size=SIZE, views="front", progress=False)
+        result = render(tmp_path / name, tmp_path / f"{name}.mp4", size=SIZE, views="front", reporter=SILENT)
         assert (result.width, result.height, result.frames, result.has_audio) == (SIZE, SIZE, FRAMES, True)
         assert abs(len(decode_audio(result.path)) / 48000 - FRAMES / FPS) <= 1 / FPS
     result = render(
@@ -256,7 +257,7 @@ def test_render_files_usd_glb_and_npy_with_template(grid_mesh, tmp_path):
         tmp_path / "npy.mp4",
         size=SIZE,
         template=tmp_path / "face.ply",
-        progress=False,
+        reporter=SILENT,
     )
     assert (result.width, result.frames, result.has_audio) == (2 * SIZE, FRAMES, False)
     assert [s for s in streams(result.path) if "Audio:" in s] == []
@@ -266,7 +267,7 @@ def test_render_files_usd_glb_and_npy_with_template(grid_mesh, tmp_path):
         tmp_path / "cmp.mp4",
         size=SIZE,
         compare=tmp_path / "truth.npy",
-        progress=False,
+        reporter=SILENT,
     )
     assert result.width == 4 * SIZE and "identical" in " ".join(result.notes)
 
@@ -289,7 +290,7 @@ def test_npy_of_the_default_model_renders_without_model(tmp_path):
 @pytest.mark.parametrize(
     ("name", "kwargs", "message"),
     [
-        ("clip.npy", {}, "120 per frame, and the built-in model's face has 23370: pass --model BUNDLE"),
+        ("clip.npy", {}, "120 per frame, and the built-in model's face has 23370: pass the template mesh"),
         ("missing.usda", {}, "does not exist"),
         ("clip.txt", {}, "unknown extension"),
         ("broken.usda", {}, "broken.usda"),
@@ -307,7 +308,7 @@ def test_bad_input_is_one_line_facegen_error(grid_mesh, tmp_path, name, kwargs, 
     before = set(tmp_path.iterdir())
     output = tmp_path / kwargs.pop("output", "out.mp4")
     with pytest.raises(FacegenError, match=message) as info:
-        render(tmp_path / name, output, progress=False, **kwargs)
+        render(tmp_path / name, output, reporter=SILENT, **kwargs)
     assert "\n" not in str(info.value)
     assert set(tmp_path.iterdir()) == before  # nothing written
 
@@ -328,7 +329,7 @@ def test_interrupted_render_leaves_no_file(grid_mesh, tmp_path, threads):
     anim = talking_clip(grid_mesh)
     anim.vertices = anim.vertices.view(_InterruptAt)
     with pytest.raises(KeyboardInterrupt):
-        render_animation(anim, tmp_path / "clip.mp4", size=SIZE, progress=False, threads=threads)
+        render_animation(anim, tmp_path / "clip.mp4", size=SIZE, reporter=SILENT, threads=threads)
     assert list(tmp_path.iterdir()) == []
 
 
