@@ -36,10 +36,10 @@ import torch
 
 from facegen.datasets.biwi import Item, Sequence
 from facegen.model import FaceModel, ModelConfig
-from facegen.motion_basis import CoefficientLoss
 from facegen.phonetics import PHONES
 from facegen.train import CHECKPOINT, epoch_order, save_checkpoint, torch_settings, train_epoch
 from facegen.train_data import Batch
+from facegen.train_pca import CoefficientLoss
 
 BIWI_VERTICES = 23370
 

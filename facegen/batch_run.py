@@ -167,6 +167,6 @@ def _check_rig(jobs: list[Job], model: Path | None) -> None:
     if not any(format_of(t).arkit for job in jobs for t in job.targets):
         return
     from facegen.bundle import load_bundle
-    from facegen.exchange.basis import check_rig
+    from facegen.exchange.morph_targets import check_rig
 
     check_rig("arkit", load_bundle(model).template)

@@ -37,7 +37,7 @@ from facegen.atomic import atomic_path
 from facegen.datasets.biwi import Item
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
-from facegen.figures import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
+from facegen.plot_basics import FIG_WIDTH, plot_loss_curves, pyplot, save_figure
 from facegen.runtime import SILENT, STDERR, Reporter, silent, threads
 
 if TYPE_CHECKING:

@@ -42,9 +42,9 @@ import torch
 from facegen.atomic import atomic_path, check_writable
 from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
-from facegen.figures import plot_loss_curves
 from facegen.model import FaceModel, ModelConfig
 from facegen.phonetics import PHONES
+from facegen.plot_basics import plot_loss_curves
 from facegen.runtime import STDERR, Reporter, select_device
 from facegen.runtime import threads as thread_limit
 from facegen.train_config import TrainConfig

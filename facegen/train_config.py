@@ -33,7 +33,7 @@ class TrainConfig:
     `model_options` overrides ModelConfig sizes (e.g. small models for tests). `precision` (fp32, fp16,
     int8; see facegen.bundle) is how the bundle stores its weights (checkpoints are always fp32).
     `output` "full" is the paper's FC 3V; "pca" trains it in a `basis`-dimensional PCA basis of the
-    training motion (facegen.motion_basis; the bundle stores the folded FC 3V), where `lip_weight`,
+    training motion (facegen.train_pca; the bundle stores the folded FC 3V), where `lip_weight`,
     `upper_weight` and `velocity_weight` add lip-vertex, upper-face and frame-to-frame terms to the loss
     (0: the paper's MSE). `patience` stops after that many epochs without a better validation loss (None:
     every epoch runs). `phones` adds the phone stream (per-frame phones from the dataset's alignment JSON)

@@ -24,8 +24,8 @@ from facegen.runtime import Reporter
 from facegen.train_config import TrainConfig
 
 if TYPE_CHECKING:  # imported where used: an audio-only model needs no text model, a full output no basis
-    from facegen.motion_basis import CoefficientLoss
     from facegen.text import TextBackend
+    from facegen.train_pca import CoefficientLoss
 
 
 def round_robin(names: list, key) -> list:
@@ -126,7 +126,7 @@ class PcaTargets:
 
 def pca_targets(config: TrainConfig, data: TrainData, dev: torch.device, reporter: Reporter) -> PcaTargets:
     """Fit the basis (output "pca") and project every item onto it (cached by the basis's digest)."""
-    from facegen.motion_basis import CoefficientLoss, basis_digest, fit_basis, project
+    from facegen.train_pca import CoefficientLoss, basis_digest, fit_basis, project
 
     reporter.progress(f"PCA basis of the training motion ({config.basis} directions)")
     pca, mean, kept = fit_basis(data.train, config.basis, seed=config.seed)

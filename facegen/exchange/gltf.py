@@ -8,7 +8,7 @@ Layout of a written file:
     mesh "Face"    one triangle primitive: POSITION (the template: the neutral face, a real pose, which
                    static readers show), NORMAL, TEXCOORD_0 (exchange/surface.py's UVs, v down), indices
                    (uint16 when V < 65536), material 0; morph `targets` of POSITION and NORMAL offsets
-                   (exchange/basis.py, by `rig`): "pca" (default) a PCA of the clip's offsets, K the fewest
+                   (morph_targets.py, by `rig`): "pca" (default) a PCA of the clip's offsets, K the fewest
                    that keep the largest vertex error under `tolerance` x the face size (default 1e-3), or
                    `morph_targets` fixes K, or "all" = one target per frame (clips up to 300 frames), plus
                    a target "rest" whose weight is 1 in every frame; "arkit" the 52 ARKit blend shapes named
@@ -48,8 +48,8 @@ from facegen.atomic import atomic_path
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
-from facegen.exchange.basis import normal_deltas, targets_as_written, writer_basis
 from facegen.exchange.formats import by_module
+from facegen.exchange.morph_targets import normal_deltas, targets_as_written, writer_basis
 from facegen.exchange.pca import MorphBasis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path

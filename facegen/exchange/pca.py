@@ -38,7 +38,7 @@ SPARSE_SEARCH_SHARE = 0.9  # with sparse=True, K is chosen for this share of the
 class MorphBasis:
     """Morph targets reproducing an animation: frame t = template + rest + weights[t] @ targets.
 
-    The PCA basis of this module, or any other rig's named shapes (exchange/basis.py: `rig`, and the
+    The PCA basis of this module, or any other rig's named shapes (exchange/morph_targets.py: `rig`, and the
     fit's stated lip and whole-face errors in millimetres when the rig has them)."""
 
     targets: np.ndarray  # [K, V, 3] float32 offsets

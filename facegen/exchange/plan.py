@@ -61,7 +61,7 @@ class WritePlan:
         """Refuse a template the plan's rig cannot be written for (ARKit: without the rig's regions), before
         any work; `plan_write(..., template=)` does it when the template is known then."""
         if self.rig == "arkit":
-            from facegen.exchange.basis import check_rig
+            from facegen.exchange.morph_targets import check_rig
 
             check_rig(self.rig, template)
 
@@ -119,7 +119,7 @@ def _rig(fmt: Format, options: dict) -> str | None:
     rig = "arkit" if fmt.arkit else options.get("rig")
     if rig is None:
         return None
-    from facegen.exchange.basis import check_rig
+    from facegen.exchange.morph_targets import check_rig
 
     check_rig(rig)
     if rig == "arkit" and "mode" in fmt.options:

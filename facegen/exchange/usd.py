@@ -22,7 +22,7 @@ the file, stitched by a clip set on /Face/Mesh, so that the frames are never all
 
 With `mode="blendshapes"` the frames are UsdSkel blend shapes instead of `points` samples: /Face is a
 SkelRoot, and a Skeleton, a SkelAnimation with one blendShapeWeights sample per frame and one BlendShape
-per target of the rig's basis (exchange/basis.py: PCA, or with `rig="arkit"` the 52 ARKit shapes) are
+per target of the rig's basis (exchange/morph_targets.py: PCA, or with `rig="arkit"` the 52 ARKit shapes) are
 added (layout in usd_skel.py); customLayerData["facegen"]["reconstruction"] states the error of the
 reconstruction.
 
@@ -48,8 +48,8 @@ from facegen.atomic import Transaction
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_clips, usd_skel
-from facegen.exchange.basis import targets_as_written, writer_basis
 from facegen.exchange.formats import by_module
+from facegen.exchange.morph_targets import targets_as_written, writer_basis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.usd_values import python_value, usd_dict
 from facegen.exchange.wav import atomic_with_sidecar
@@ -80,7 +80,7 @@ def write(
     """Write `anim` as a USD file (format from the extension) and its audio as a WAV beside it.
 
     `mode` is "points" (one `points` sample per frame) or "blendshapes" (UsdSkel blend shapes); None is
-    "blendshapes" with `rig="arkit"`, else "points". `rig` chooses the blend shapes (exchange/basis.py):
+    "blendshapes" with `rig="arkit"`, else "points". `rig` chooses the blend shapes (morph_targets.py):
     "pca", whose `morph_targets` fixes their number K, an int, or "all" for one per frame (by default K is
     the fewest keeping every vertex within `tolerance` x the face's size, default pca.DEFAULT_TOLERANCE),
     or "arkit", the 52 ARKit shapes named by ARKit's names (the face needs the rig's regions).

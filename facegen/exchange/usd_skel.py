@@ -1,7 +1,7 @@
 """UsdSkel blendshapes: the animation as a few BlendShape targets and one weight curve per target.
 
 `facegen.exchange.usd.write(..., mode="blendshapes")` calls this module. The targets are the writers'
-basis (exchange/basis.py, the same code path as glTF morph targets): by rig, the PCA basis with weights
+basis (morph_targets.py, the same code path as glTF morph targets): by rig, the PCA basis with weights
 rescaled into [0, 1] (Blender clamps a shape key's value to its 0..1 slider range), or the 52 ARKit shapes
 named by their ARKit names with the solver's weights, so a frame is
 
@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.exchange.basis import REST_SHAPE
+from facegen.exchange.morph_targets import REST_SHAPE
 from facegen.exchange.pca import MorphBasis
 
 SKELETON_PATH = "/Face/Skeleton"

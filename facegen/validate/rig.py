@@ -9,7 +9,7 @@
 from __future__ import annotations
 
 from facegen.arkit.names import ARKIT_NAMES, arkit_name
-from facegen.exchange.basis import REST_SHAPE
+from facegen.exchange.morph_targets import REST_SHAPE
 from facegen.validate.report import Report
 
 _SHOWN = 6  # names listed in the detail before "..."
