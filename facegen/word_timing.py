@@ -46,7 +46,7 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
         reporter.progress("aligning the transcript to the speech (pocketsphinx)")
         return forced(samples, sr, text, ahead, with_phones=False)[0], FORCED
     reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
-                  "transcript; pass --text, --text-file or --alignment for better upper-face motion)")
+                  "transcript; give the transcript or an alignment file for better upper-face motion)")
     return align.recognize(samples, sr), RECOGNISED
 
 
@@ -95,9 +95,9 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     except FacegenError:
         words, found = recognised, silence(num_frames)
         reporter.note("no phones could be found in the audio without a transcript: the lips follow the audio "
-                      "alone (pass --text for better lip sync)")
+                      "alone (give the transcript for better lip sync)")
     if not no_text:
         reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
-                      "a transcript; pass --text, --text-file or --alignment for better lips and upper face)")
+                      "a transcript; give the transcript or an alignment file for better lips and upper face)")
         return words, RECOGNISED, found
     return [], NONE, found

@@ -270,7 +270,7 @@ def import_biwi(raw: str | os.PathLike, out: str | os.PathLike, *, normalisation
                                    "of the mesh: pass the region files of this topology")
             region_idx[region] = idx
     else:
-        reporter.note("no --regions given: copy lve.txt and fdd.txt into regions/ before evaluating "
+        reporter.note("no region files given: copy lve.txt and fdd.txt into regions/ before evaluating "
                       "(LVE and FDD need them)")
     fresh = not out.exists() or (out.is_dir() and not any(out.iterdir()))
     try:
