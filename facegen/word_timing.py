@@ -98,6 +98,6 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
                       "alone (give the transcript for better lip sync)")
     if not no_text:
         reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
-                      "a transcript; give the transcript or an alignment file for better lips and upper face)")
+                      "a transcript; give the transcript or an alignment file for better lips and brows)")
         return words, RECOGNISED, found
     return [], NONE, found
