@@ -202,7 +202,8 @@ def test_help_is_fast_and_lists_commands():
      "do not apply to --preset voices"),
     (["data", "synth", "{d}/out", "--limit", "3"], "--limit applies to --preset voices only"),
     (["align", "{speech}", "--phones"], "--phones needs the transcript"),
-    (["align", "{speech}", "--text", "hi", "--phones", "-o", "{d}/out.csv"], "use .json or .TextGrid"),
+    (["align", "{speech}", "--text", "hi", "--phones", "-o", "{d}/out.csv"],
+     "use a .json or .TextGrid file name"),
 ])
 def test_corpus_and_phone_errors_are_one_line(tmp_path, args, fragment):
     from facegen.audio import write_wav
