@@ -25,7 +25,7 @@ import numpy as np
 
 from facegen.align_ahead import AlignAhead, Aligned
 from facegen.animation import Animation
-from facegen.audio import check_speech, load_audio, mel_features, num_frames
+from facegen.audio import check_speech, is_silent, load_audio, mel_features, num_frames
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, check_topology, read_mesh
 from facegen.runtime import PROFILE, SILENT, Reporter, select_device, silent
@@ -60,6 +60,8 @@ class Clip(NetworkInput):
     words: list | None = None
     word_timing: str = NONE
     mesh: Mesh | None = None
+    fps: float | None = None  # the Animation's frame rate (None: the network's)
+    idle: bool = False  # silent audio: the neutral face in every frame, without the network
 
 
 class Animator:
@@ -162,7 +164,7 @@ class Animator:
     def prepare(self, audio: str | os.PathLike, *, text: str | None = None,
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
-                reporter: Reporter = SILENT, aligned: Aligned | None = None,
+                fps: float | None = None, reporter: Reporter = SILENT, aligned: Aligned | None = None,
                 meanwhile: Callable[[], object] | None = None) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
@@ -170,8 +172,10 @@ class Animator:
         words, not their times) and `meanwhile` is called (e.g. to import the writer's libraries)."""
         ahead = self._take_ahead(audio, text) or aligned
         try:
-            return self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
+            clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                  template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile)
+            clip.fps = check_fps(fps)
+            return clip
         finally:
             if ahead is not None and ahead is not aligned:
                 self.close()
@@ -184,8 +188,16 @@ class Animator:
         with PROFILE.stage("audio"):
             samples, sr = load_audio(audio)
         cfg = bundle.features
-        check_speech(samples, sr, cfg.fps, name=f"audio file {audio}")
+        check_speech(samples, sr, cfg.fps, name=f"audio file {audio}", silence_ok=True)
         T = num_frames(len(samples) / sr, cfg.fps)
+        if is_silent(samples):  # a character listening: the neutral face, no network, no words
+            if text is not None or alignment is not None:
+                raise FacegenError(f"audio file {audio} is silent (peak below -80 dBFS) but words were "
+                                   "given: pass the recording with the speech, or no words for an idle clip",
+                                   param=("text", "alignment"))
+            reporter.note(f"audio file {audio} is silent: an idle clip of the neutral face")
+            return Clip(np.zeros((T, cfg.n_mels), np.float32), None, spk, audio_name=Path(audio).name,
+                        samples=samples, sample_rate=sr, words=[], word_timing=NONE, mesh=mesh, idle=True)
         if len(samples) / sr < LONG_INPUT_SECONDS:
             reporter = replace(reporter, progress=silent)
         with PROFILE.stage("audio_features"):  # before the words: done while an alignment started ahead runs
@@ -271,13 +283,27 @@ class Animator:
     def run(self, clips: Sequence[Clip], *, batch_size: int = BATCH_SIZE) -> list[Animation]:
         """The Animations of prepared clips, in order; the decoder BiLSTMs run `batch_size` clips at a time,
         sorted by length (each clip's result equals its own single run); the frames are FrameStreams."""
+        from facegen.inference import FrameStream, frame_stream, states_at_rate
+
         out: list[Animation | None] = [None] * len(clips)
         order = sorted(range(len(clips)), key=lambda i: clips[i].num_frames)
+        fps = self.bundle.features.fps
+        for i in order:
+            if clips[i].idle:  # the template in every frame: a stream of no states and no weights
+                frames = num_frames(len(clips[i].samples) / clips[i].sample_rate, clips[i].fps or fps)
+                vertices = clips[i].mesh.vertices
+                still = FrameStream(np.zeros((frames, 1), np.float32),
+                                    np.zeros((vertices.size, 1), np.float32), vertices)
+                out[i] = self.animation(clips[i], still)
+        order = [i for i in order if not clips[i].idle]
         for b in range(0, len(order), batch_size):
             ids = order[b:b + batch_size]
-            batch = [clips[i] for i in ids]
-            for i, frames in zip(ids, self.frames(batch, [c.mesh.vertices for c in batch]), strict=True):
-                out[i] = self.animation(clips[i], frames)
+            for i, states in zip(ids, self.states([clips[i] for i in ids]), strict=True):
+                clip = clips[i]
+                if clip.fps is not None and clip.fps != fps:  # another frame rate: the states resampled
+                    frames = num_frames(len(clip.samples) / clip.sample_rate, clip.fps)
+                    states = states_at_rate(states, fps, clip.fps, frames)
+                out[i] = self.animation(clip, frame_stream(self.bundle, states, clip.mesh.vertices))
         return out
 
     def animation(self, clip: Clip, vertices) -> Animation:
@@ -286,7 +312,7 @@ class Animator:
         return Animation(
             vertices=vertices,
             faces=clip.mesh.faces,
-            fps=bundle.features.fps,
+            fps=clip.fps or bundle.features.fps,
             template=clip.mesh.vertices,
             audio=clip.samples,
             sample_rate=clip.sample_rate,
@@ -307,15 +333,16 @@ class Animator:
     def animate(self, audio: str | os.PathLike, *, text: str | None = None,
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
-                stream: bool = False, reporter: Reporter = SILENT,
+                fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
                 meanwhile: Callable[[], object] | None = None) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
+        check_fps(fps)
         self.align_ahead(audio, text=text, alignment=alignment, no_text=no_text)
         try:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
-                                template=template, reporter=reporter, meanwhile=meanwhile)
+                                template=template, fps=fps, reporter=reporter, meanwhile=meanwhile)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -329,14 +356,16 @@ class Animator:
 def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str | os.PathLike | None = None,
             no_text: bool = False, speaker: str | int | None = None, bundle=None,
             template: str | os.PathLike | Mesh | None = None, text_model: str | None = None,
-            device: str = "auto", stream: bool = False, reporter: Reporter = SILENT,
+            device: str = "auto", fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
             meanwhile: Callable[[], object] | None = None) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
     recognition; `no_text=True` feeds zero text features instead. `bundle` is a loaded Bundle or a path
     (None: the built-in default model). `device` is "auto" (a CUDA GPU when torch sees one, else the
-    CPU), "cpu" or "cuda" (a FacegenError without a GPU).
+    CPU), "cpu" or "cuda" (a FacegenError without a GPU). `fps`: the Animation's frame rate (None: the
+    network's, 25; film 24, games 30 or 60): the network runs at its own rate and its decoder states are
+    resampled (inference.states_at_rate), so lips and closures stay as they are.
     With `stream=True` the Animation's vertices are a FrameStream, computed block by block as a writer
     reads them (bounded memory for long clips); otherwise a [T, V, 3] float32 array.
     `reporter` (a facegen.Reporter; default: silent) receives stage messages for long clips (>= 20 s) as
@@ -345,8 +374,24 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     runs once the model is loaded, `meanwhile` is called (e.g. to import the writer's libraries).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
-        audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template,
+        audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
         stream=stream, reporter=reporter, meanwhile=meanwhile)
+
+
+MAX_FPS = 240.0  # output frames per second at most
+
+
+def check_fps(fps: float | None) -> float | None:
+    """An output frame rate: None (the network's) or a finite number in (0, 240]."""
+    import math
+
+    if fps is None:
+        return None
+    number = isinstance(fps, int | float) and not isinstance(fps, bool)
+    if not number or not math.isfinite(fps) or not 0 < fps <= MAX_FPS:
+        raise FacegenError(f"the frame rate must be a number of frames per second in (0, {MAX_FPS:g}], got "
+                           f"{fps!r}: e.g. 24, 25, 30 or 60", param="fps")
+    return float(fps)
 
 
 def forced_alignment_of(model: str | os.PathLike | None) -> str | None:

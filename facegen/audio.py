@@ -131,14 +131,24 @@ def num_frames(duration: float, fps: float) -> int:
     return round(duration * fps)
 
 
-def check_speech(samples: np.ndarray, sr: int, fps: float, name: str = "audio") -> None:
-    """Refuse audio that cannot be animated: shorter than one frame, or silent."""
+SILENT_PEAK = 1e-4  # -80 dBFS: audio whose peak stays below this holds no speech
+
+
+def is_silent(samples: np.ndarray) -> bool:
+    """Whether `samples` peak below -80 dBFS (no speech to align or hear)."""
+    return len(samples) == 0 or float(np.max(np.abs(samples))) < SILENT_PEAK
+
+
+def check_speech(samples: np.ndarray, sr: int, fps: float, name: str = "audio",
+                 silence_ok: bool = False) -> None:
+    """Refuse audio that cannot be animated: shorter than one frame, or silent (unless `silence_ok`: a silent
+    clip animates as an idle face)."""
     if num_frames(len(samples) / sr, fps) < 1:
         raise FacegenError(
             f"{name} is {len(samples) / sr * 1000:.0f} ms long, shorter than one frame at {fps:g} fps: "
             "pass a longer recording"
         )
-    if float(np.max(np.abs(samples))) < 1e-4:
+    if not silence_ok and is_silent(samples):
         raise FacegenError(f"{name} is silent (peak below -80 dBFS): pass a recording with speech")
 
 

@@ -153,6 +153,9 @@ def read_metadata(path: str | os.PathLike) -> dict:
     if not path.is_file():
         raise FacegenError(f"model bundle {path} does not exist: pass the path of a .safetensors bundle",
                            param="bundle")
+    if not _looks_like_safetensors(path):
+        raise FacegenError(f"{path} is not a model bundle (not a safetensors file): pass a facegen "
+                           ".safetensors bundle", param="bundle")
     try:
         with safe_open(str(path), framework="numpy") as f:
             raw = (f.metadata() or {}).get("facegen")
@@ -173,6 +176,32 @@ def read_metadata(path: str | os.PathLike) -> dict:
             f"reads ({FORMAT_VERSION}): upgrade facegen"
         )
     return meta
+
+
+def _looks_like_safetensors(path: Path) -> bool:
+    """A safetensors file starts with its JSON header's length (8 bytes, little endian) and then "{"."""
+    with open(path, "rb") as f:
+        head = f.read(9)
+    if len(head) < 9:
+        return False
+    return 2 <= int.from_bytes(head[:8], "little") <= path.stat().st_size - 8 and head[8:9] == b"{"
+
+
+def read_template(path: str | os.PathLike | None = None) -> Mesh:
+    """A bundle's template mesh (the built-in model's when `path` is None), read without torch or the weights
+    (validate and render of a .npy need the face, not the network)."""
+    from safetensors import safe_open
+
+    path = default_bundle_path() if path is None else Path(path)
+    read_metadata(path)  # a missing, foreign or corrupt file: its one-line error
+    try:
+        with safe_open(str(path), framework="numpy") as f:
+            names = [k for k in f.keys() if k.startswith("region.")]  # noqa: SIM118 - safe_open is no dict
+            regions = {k.removeprefix("region."): f.get_tensor(k) for k in names}
+            return Mesh(f.get_tensor("template.vertices"), f.get_tensor("template.faces"), regions)
+    except Exception as exc:
+        raise FacegenError(f"model bundle {path} is corrupt or truncated ({exc}): re-download or re-train "
+                           "it", param="bundle") from exc
 
 
 def load_bundle(path: str | os.PathLike | None = None) -> Bundle:

@@ -50,13 +50,16 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--tolerance", type=FiniteRange(0, 1, min_open=True),
               help="glTF / USD blendshapes: largest vertex error allowed, as a fraction of the face size "
                    "(default 1e-3).")
+@click.option("--fps", type=FiniteRange(0, 240, min_open=True),
+              help="Frames per second of the output (default: the model's, 25): e.g. 24 for film, 30 or 60 "
+                   "for games; the network's frames are resampled, lips and closures intact.")
 @click.option("--preview", type=click.Path(dir_okay=False),
               help="Also render a preview video (.mp4) with sound.")
 @click.option("--device", type=DEVICE, default="auto", show_default=True,
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-            usd_mode, usd_clips, rig, morph_targets, tolerance, preview, device, quiet):
+            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.animator import Animator
     from facegen.atomic import Transaction
@@ -82,8 +85,13 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     reporter = Reporter.stderr(quiet).noting(say_stderr)
     # plan.streams: the writer reads frames block by block, no [T, V, 3] array in memory
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
-                            template=template, stream=plan.streams, reporter=reporter,
+                            template=template, fps=fps, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer)
+    from facegen.word_timing import RECOGNISED
+
+    if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it
+        heard = " ".join(w["word"] for w in anim.metadata["words"]) or "(no words)"
+        reporter.note(f"heard: {heard}")
     with Transaction():  # all or nothing: no animation without the preview asked for
         written = plan.write(anim)
         reporter.progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at "

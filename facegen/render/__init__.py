@@ -213,15 +213,16 @@ def _read_input(
 def _default_template(path: Path) -> Mesh:
     """The built-in model's template for a .npy of its vertex count (what `facegen animate` writes with the
     default model); any other count is a FacegenError asking for the mesh."""
-    from facegen.bundle import load_bundle
-    from facegen.exchange.npy import load_frames
+    from facegen.bundle import read_template
+    from facegen.exchange.npy import builtin_template, load_frames
 
     count = load_frames(path).shape[1] // 3
-    template = load_bundle(None).template
-    if count != template.num_vertices:
+    template = builtin_template(count)
+    if template is None:
         raise FacegenError(
             f"{path.name} stores only vertex positions, {count} per frame, and the built-in model's face has "
-            f"{template.num_vertices}: pass the template mesh that gives its faces", param="template"
+            f"{read_template(None).num_vertices}: pass the template mesh that gives its faces",
+            param="template"
         )
     return template
 

@@ -114,7 +114,8 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     rate = rate or decoded["fps"] or fps or DEFAULT_FPS
     _check_keys(report, decoded, rate)
     check_values(report, frames if len(base) == count else [], base, template, expected.max_displacement)
-    _check_reconstruction(report, frames, info, template, rate, expected.reference)
+    own = template if template is not None else Mesh(np.asarray(base, np.float32), decoded["faces"])
+    _check_reconstruction(report, frames, info, own, rate, expected.reference)  # a .npy reference: this face
 
     audio = None
     wav = Path(expected.audio_path) if expected.audio_path is not None else sidecar_path(path)

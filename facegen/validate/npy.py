@@ -1,7 +1,8 @@
 """Checks on .npy animations ([T, 3V] float arrays, exchange/npy.py), added to a Report:
 
   file            a [T, 3V] float array, no pickles
-  template        a template is given (.npy files store no faces or rest pose)
+  template        the template given, else the built-in model's face when the vertex count is its
+                  (.npy files store no faces or rest pose)
   vertex count    every frame has the template's vertex count
   finite, displacement, audio (the WAV sidecar, or `audio_path`), audio duration   as in checks.py
 """
@@ -24,12 +25,14 @@ def check(report: Report, path: Path, expected: Expected) -> None:
     if data is None:
         return
     report.add("file", True, f"[{data.shape[0]}, {data.shape[1]}] {data.dtype} array")
-    if template is None:
-        report.add(
-            "template", False, ".npy files store no faces or rest pose: pass the template mesh (--template)"
-        )
-        return
     num_vertices = data.shape[1] // 3
+    if template is None:  # what `facegen animate` writes with the default model: its face
+        template = npy_format.builtin_template(num_vertices)
+        if template is None:
+            report.add("template", False, f".npy files store no faces or rest pose, and {num_vertices} "
+                       "vertices per frame are not the built-in model's face: pass the template mesh")
+            return
+        report.add("template", True, "the built-in model's face (the vertex count matches)")
     same = num_vertices == template.num_vertices
     report.add(
         "vertex count",

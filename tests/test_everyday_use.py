@@ -1,0 +1,150 @@
+"""What a new user meets first (issue 22): other frame rates, silent clips, validating facegen's own .npy and
+glTF output without naming the face, `info` on a file that is not a bundle, the words heard without a
+transcript. Real model, real audio, real files."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from facegen.errors import FacegenError
+
+ROOT = Path(__file__).resolve().parents[1]
+WAV = ROOT / "examples" / "excellent_room.wav"
+TEXT = (ROOT / "examples" / "excellent_room.txt").read_text()
+
+
+def facegen(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "facegen", *map(str, args)], capture_output=True, text=True,
+                          env={**os.environ, "HF_HUB_OFFLINE": "1"}, timeout=600, check=False)
+
+
+@pytest.fixture(scope="module")
+def animator():
+    from facegen.animator import Animator
+
+    return Animator()
+
+
+@pytest.fixture(scope="module")
+def at_25(animator):
+    return animator.animate(WAV, text=TEXT)
+
+
+# ---- frame rates -----------------------------------------------------------------------------------------
+
+
+def test_states_at_rate_interpolates_between_network_frames():
+    from facegen.inference import states_at_rate
+
+    states = np.arange(10, dtype=np.float32)[:, None] * np.array([[1.0, -2.0]], np.float32)
+    same = states_at_rate(states, 25.0, 25.0, 10)
+    assert same is states
+    up = states_at_rate(states, 25.0, 50.0, 20)
+    assert up.shape == (20, 2)
+    assert np.allclose(up[::2], states) and np.allclose(up[1:-1:2], (states[:-1] + states[1:]) / 2)
+    assert np.allclose(up[-1], states[-1])  # past the last network frame: held
+    down = states_at_rate(states, 25.0, 24.0, 9)
+    assert np.allclose(down[:, 0], np.arange(9) * 25 / 24)  # frame i at time i / 24
+
+
+@pytest.mark.parametrize("fps", [24.0, 30.0, 60.0])
+def test_other_frame_rates_keep_the_motion(animator, at_25, fps):
+    anim = animator.animate(WAV, text=TEXT, fps=fps)
+    duration = len(at_25.audio) / at_25.sample_rate
+    assert anim.fps == fps and anim.num_frames == round(duration * fps)
+    # the same motion in time: frames at the 25 fps times agree with the 25 fps frames (interpolated between)
+    from facegen.lipsync import aperture
+
+    a25 = aperture(at_25.vertices, at_25.mesh)
+    a = aperture(anim.vertices, anim.mesh)
+    resampled = np.interp(np.arange(len(a25)) / 25.0, np.arange(len(a)) / fps, a)
+    assert np.corrcoef(a25, resampled)[0, 1] > 0.97
+    assert abs(a.min() - a25.min()) < 0.05 and abs(a.max() - a25.max()) < 0.05  # cm: closures and peaks kept
+    assert np.array_equal(anim.audio, at_25.audio)
+
+
+def test_bad_frame_rates_name_the_parameter(animator):
+    for bad in (0, -25, float("nan"), float("inf"), 1000, "30", True):
+        with pytest.raises(FacegenError, match="frame rate") as info:
+            animator.animate(WAV, text=TEXT, fps=bad)
+        assert info.value.param == "fps"
+
+
+def test_fps_reaches_every_format(tmp_path):
+    done = facegen("animate", WAV, "--text-file", ROOT / "examples" / "excellent_room.txt", "--fps", "30",
+                   "-q", "-o", tmp_path / "out.json")
+    assert done.returncode == 0, done.stderr
+    data = json.loads((tmp_path / "out.json").read_text())
+    seconds = sf.info(str(WAV)).duration
+    assert data["exportFps"] == 30 and data["numFrames"] == len(data["weightMat"]) == round(seconds * 30)
+    refused = facegen("animate", WAV, "--no-text", "--fps", "0", "-o", tmp_path / "x.npy")
+    assert refused.returncode == 2 and "--fps" in refused.stderr and len(refused.stderr.splitlines()) == 1
+    assert not (tmp_path / "x.npy").exists()
+
+
+# ---- silence ---------------------------------------------------------------------------------------------
+
+
+def test_a_silent_clip_is_the_neutral_face(animator, tmp_path):
+    wav = tmp_path / "quiet.wav"
+    sf.write(wav, np.zeros(16000 * 2, np.float32), 16000)
+    notes = []
+    from facegen.runtime import Reporter
+
+    anim = animator.animate(wav, reporter=Reporter(note=notes.append), fps=30)
+    assert anim.num_frames == 60 and anim.metadata["words"] == []
+    frames = np.asarray(anim.vertices)
+    assert np.array_equal(frames, np.broadcast_to(anim.template, frames.shape))
+    assert any("idle clip" in n for n in notes)
+    with pytest.raises(FacegenError, match="silent") as info:
+        animator.animate(wav, text="hello there")
+    assert "text" in info.value.params
+    done = facegen("animate", wav, "-q", "-o", tmp_path / "idle.usdc")
+    assert done.returncode == 0, done.stderr
+    assert facegen("validate", tmp_path / "idle.usdc").returncode == 0
+
+
+# ---- validate finds the face -----------------------------------------------------------------------------
+
+
+def test_validate_finds_the_built_in_face(at_25, tmp_path):
+    from facegen.exchange import write_animation
+
+    write_animation(at_25, tmp_path / "out.npy")
+    done = facegen("validate", tmp_path / "out.npy")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "built-in model's face" in done.stdout
+    write_animation(at_25, tmp_path / "out.glb")
+    done = facegen("validate", tmp_path / "out.glb", "--reference", tmp_path / "out.npy", "--json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    checks = {c["name"]: c for c in json.loads(done.stdout)["checks"]}
+    assert checks["reconstruction"]["ok"] and "against the reference" in checks["reconstruction"]["detail"]
+    np.save(tmp_path / "other.npy", np.zeros((3, 30), np.float32))
+    done = facegen("validate", tmp_path / "other.npy")
+    assert done.returncode == 1 and "not the built-in model's face" in done.stdout
+
+
+def test_info_on_a_file_that_is_not_a_bundle(tmp_path):
+    for name, data in (("notes.safetensors", b"hello, this is text"), ("x.safetensors", b"\x00" * 64)):
+        (tmp_path / name).write_bytes(data)
+        done = facegen("info", tmp_path / name)
+        assert done.returncode == 2 and "is not a model bundle" in done.stderr, done.stderr
+        assert "re-download" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+# ---- without a transcript --------------------------------------------------------------------------------
+
+
+def test_the_words_heard_without_a_transcript_are_said(tmp_path):
+    done = facegen("animate", WAV, "-o", tmp_path / "out.npy")
+    assert done.returncode == 0, done.stderr
+    heard = [line for line in done.stderr.splitlines() if line.startswith("facegen: heard: ")]
+    assert len(heard) == 1 and len(heard[0].split()) >= 4, done.stderr
