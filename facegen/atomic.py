@@ -151,6 +151,35 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
         yield transaction.file(target)
 
 
+@contextlib.contextmanager
+def output_folders(*targets: str | os.PathLike | None) -> Iterator[None]:
+    """Create the missing folders above each target (as `mkdir -p`), and remove those made here again when the
+    block fails: a run that writes nothing leaves no empty folder behind."""
+    made: list[Path] = []
+    try:
+        for target in targets:
+            if target is None:
+                continue
+            folder = Path(target).parent
+            missing = []
+            while not folder.exists() and not folder.is_symlink() and folder != folder.parent:
+                missing.append(folder)
+                folder = folder.parent
+            for folder in reversed(missing):
+                try:
+                    folder.mkdir()
+                except OSError as exc:
+                    raise FacegenError(f"cannot create the output folder {folder} ({exc.strerror}): choose "
+                                       "another output path", param="path") from exc
+                made.append(folder)
+        yield
+    except BaseException:
+        for folder in reversed(made):  # the deepest first; a folder something else wrote into stays
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
 _current: contextvars.ContextVar[Transaction | None] = contextvars.ContextVar("transaction", default=None)
 
 

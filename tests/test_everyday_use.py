@@ -148,3 +148,15 @@ def test_the_words_heard_without_a_transcript_are_said(tmp_path):
     assert done.returncode == 0, done.stderr
     heard = [line for line in done.stderr.splitlines() if line.startswith("facegen: heard: ")]
     assert len(heard) == 1 and len(heard[0].split()) >= 4, done.stderr
+
+
+# ---- output folders
+
+
+def test_animate_makes_the_output_folder_and_removes_it_when_nothing_is_written(tmp_path):
+    done = facegen("animate", WAV, "--no-text", "-q", "-o", tmp_path / "new" / "deeper" / "out.npy")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "new" / "deeper" / "out.npy").is_file()
+    failed = facegen("animate", tmp_path / "missing.wav", "--no-text", "-o", tmp_path / "a" / "b" / "out.npy")
+    assert failed.returncode == 2 and len(failed.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "a").exists()  # the folders made for it are gone again

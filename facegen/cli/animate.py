@@ -61,11 +61,20 @@ from facegen.runtime import Reporter, say_stderr
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
+    from facegen.atomic import output_folders
+
+    one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
+    with output_folders(output, preview):  # made as needed, removed again when nothing is written
+        _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
+                 usd_mode, usd_clips, rig, morph_targets, tolerance, fps, preview, device, quiet)
+
+
+def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
+             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, preview, device, quiet):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
 
-    one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig),
                                  ("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None}
     # everything the path and options decide fails before any work: extension, folders, sidecar, options
