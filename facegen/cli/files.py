@@ -39,14 +39,17 @@ def render(input_file, output, compare, model, template, fps, size, views, error
         raise FacegenError("--model and --template cannot be used together: pass one reference")
     mesh = template
     if model:
-        from facegen.bundle import load_bundle
+        from facegen.bundle import read_template
 
-        mesh = load_bundle(model).template
+        mesh = read_template(model)
+    reporter = Reporter.stderr(quiet)
     result = run(input_file, output, size=size, views=views, compare=compare, template=mesh, fps=fps,
-                 error_scale=error_scale, reporter=Reporter.stderr(quiet))
+                 error_scale=error_scale, reporter=reporter)
     for note in result.notes:
         click.echo(f"facegen: {note}", err=True)
-    click.echo(str(result.path))
+    # as animate says it: "wrote PATH (...)", a progress line (silenced by --quiet)
+    reporter.progress(f"wrote {result.path} ({result.width}x{result.height}, {result.frames} frames, "
+                      f"{result.seconds:.1f} s to render)")
 
 
 @click.command(cls=Command)
@@ -71,9 +74,9 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
         raise FacegenError(f"{file} does not exist: pass the animation file to check")
     mesh = None
     if model:
-        from facegen.bundle import load_bundle
+        from facegen.bundle import read_template
 
-        mesh = load_bundle(model).template
+        mesh = read_template(model)  # the face alone: validate never imports torch
     elif template:
         from facegen.face.mesh import read_mesh
 
