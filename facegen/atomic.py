@@ -41,6 +41,8 @@ def check_writable(target: str | os.PathLike) -> None:
     """Fail early, before any work, when `target` cannot be written."""
     target = Path(target)
     folder = _folder(target)
+    if folder.exists() and not folder.is_dir():
+        raise FacegenError(f"output folder {folder} is a file: choose another output path", param="path")
     if not folder.is_dir():
         raise FacegenError(f"output folder {folder} does not exist: create it or choose another output path",
                            param="path")

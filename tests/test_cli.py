@@ -180,8 +180,8 @@ def test_unwritable_output_and_debug_traceback(work):
         _bad_inputs(d)
     import os
 
-    if os.geteuid() == 0:  # root writes anywhere: use a missing folder instead
-        target = d / "no_such_dir" / "out.usda"
+    if os.geteuid() == 0:  # root writes anywhere (and animate makes missing folders): a file as the folder
+        target = d / "speech.wav" / "out.usda"
     else:
         target = ro / "out.usda"
     p = run("animate", d / "speech.wav", "--no-text", "--model", d / "model.safetensors", "-o", target)
