@@ -1,0 +1,149 @@
+"""The mismatch check on recorded speech: correct scripts refused, wrong ones accepted (issue 22).
+
+The recorded library is Asterisk's English prompts (a professional voice, 8 kHz telephone band, ~550 lines of
+0.4-73 s with their recording script; Debian: `apt-get install asterisk-core-sounds-en-wav`), read with its
+script file as a user's CI would: every line animates with its script or is refused. Cases per line:
+
+- correct: the line with its own script (stage directions such as "[beep]" or "(note: ...)" included, as
+  scripts carry them); a script that is only a direction is counted apart (no words to align);
+- shuffled: the line with the script of another line of >= 5 words (a swapped row);
+- near miss: the script with one content word replaced by another word of the library (a typo-sized
+  difference the check may let through; reported, not a target).
+
+Each case runs `facegen.align.align` (the forced alignment every `animate` with a transcript runs; the model
+and the writer do not change the outcome) and records accepted/refused with the reason and the check's two
+scores. `--half odd` (the default) uses the lines at odd positions of the sorted list for development; `even`
+is kept for the held-out figure; `all` both.
+
+    python benchmarks/bench_mismatch.py [--half odd|even|all] [--limit N] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+SOUNDS = Path("/usr/share/asterisk/sounds/en")
+SCRIPT = Path("/usr/share/doc/asterisk-core-sounds-en/core-sounds-en.txt.gz")
+DIRECTION = re.compile(r"\[[^\]]*\]|\([^)]*\)|<[^>]*>")
+
+
+def library(sounds: Path, script: Path) -> list[tuple[str, Path, str]]:
+    """(name, wav, script line) for every line of the script whose recording exists, sorted by name."""
+    opener = gzip.open if script.suffix == ".gz" else open
+    lines = []
+    with opener(script, "rt", encoding="utf-8", errors="replace") as f:
+        for row in f:
+            if row.startswith(";") or ":" not in row:
+                continue
+            name, _, text = row.partition(":")
+            wav = sounds / f"{name.strip()}.wav"
+            if wav.is_file() and text.strip():
+                lines.append((name.strip(), wav, text.strip()))
+    return sorted(lines)
+
+
+def spoken_words(text: str) -> list[str]:
+    return DIRECTION.sub(" ", text).split()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sounds", type=Path, default=SOUNDS)
+    ap.add_argument("--script", type=Path, default=SCRIPT)
+    ap.add_argument("--half", choices=("odd", "even", "all"), default="odd")
+    ap.add_argument("--limit", type=int, default=0, help="at most this many lines (0: all)")
+    ap.add_argument("--json", type=Path, help="write every case's outcome and scores here")
+    args = ap.parse_args(argv)
+    if not args.script.is_file():
+        print(f"{args.script} is missing: apt-get install asterisk-core-sounds-en-wav", file=sys.stderr)
+        return 2
+
+    from facegen import align
+    from facegen.audio import load_audio
+    from facegen.errors import FacegenError
+
+    lines = library(args.sounds, args.script)
+    lines = lines[1::2] if args.half == "odd" else lines[0::2] if args.half == "even" else lines
+    if args.limit:
+        lines = lines[:args.limit]
+    rng = np.random.default_rng(0)
+    long_scripts = [text for _, _, text in lines if len(spoken_words(text)) >= 5]
+    vocabulary = sorted({w.strip(".,!?;:\"'").lower() for t in long_scripts for w in spoken_words(t)
+                         if len(w) > 3 and w.isalpha()})
+
+    scores: list[tuple[float, float]] = []
+    check = align._check_match
+
+    def recording(loud, words, gaps, free):
+        scores.append(align.match_scores(loud, words, gaps, free))
+        return check(loud, words, gaps, free)
+
+    align._check_match = recording
+    cases = []
+
+    def run(kind: str, name: str, samples, rate, text: str) -> None:
+        scores.clear()
+        start = time.perf_counter()
+        try:
+            align.align(samples, rate, text)
+            outcome, why = "accepted", ""
+        except FacegenError as exc:
+            outcome, why = "refused", str(exc)
+        seconds = time.perf_counter() - start
+        unexplained, gap = scores[-1] if scores else (float("nan"), float("nan"))
+        cases.append({"kind": kind, "line": name, "text": text, "outcome": outcome, "why": why[:160],
+                      "unexplained": unexplained, "gap": gap, "seconds": round(seconds, 3),
+                      "duration": round(len(samples) / rate, 2)})
+
+    try:
+        for i, (name, wav, text) in enumerate(lines):
+            samples, rate = load_audio(wav)
+            kind = "direction only" if not spoken_words(text) else "correct"
+            run(kind, name, samples, rate, text)
+            if len(spoken_words(text)) >= 5:
+                others = [t for t in long_scripts if t != text]
+                run("shuffled", name, samples, rate, others[int(rng.integers(len(others)))])
+                words = text.split()
+                content = [k for k, w in enumerate(words) if len(w.strip(".,!?;:")) > 3 and w.isalpha()]
+                if content:
+                    k = content[int(rng.integers(len(content)))]
+                    words[k] = vocabulary[int(rng.integers(len(vocabulary)))]
+                    run("near miss", name, samples, rate, " ".join(words))
+            if (i + 1) % 25 == 0:
+                print(f"  {i + 1}/{len(lines)} lines", file=sys.stderr, flush=True)
+    finally:
+        align._check_match = check
+
+    print(f"{len(lines)} lines ({args.half} half of {args.sounds})\n")
+    print("| case | runs | accepted | refused |\n|---|---|---|---|")
+    for kind in ("correct", "direction only", "shuffled", "near miss"):
+        got = [c for c in cases if c["kind"] == kind]
+        if got:
+            ok = sum(c["outcome"] == "accepted" for c in got)
+            no = len(got) - ok
+            print(f"| {kind} | {len(got)} | {ok} ({ok / len(got):.1%}) | {no} ({no / len(got):.1%}) |")
+    print("\ncorrect scripts refused:")
+    for c in cases:
+        if c["kind"] == "correct" and c["outcome"] == "refused":
+            print(f"  {c['line']} ({c['duration']} s) {c['text'][:60]!r}: {c['why'][:110]}")
+    print("\nwrong scripts accepted (shuffled):")
+    for c in cases:
+        if c["kind"] == "shuffled" and c["outcome"] == "accepted":
+            print(f"  {c['line']} as {c['text'][:60]!r}: unexplained {c['unexplained']:.2f}, gap {c['gap']:.1f}")
+    seconds = [c["seconds"] / max(c["duration"], 1e-3) for c in cases if c["kind"] == "correct"]
+    print(f"\nalignment time: {np.median(seconds):.3f} s per second of audio (median of correct lines)")
+    if args.json:
+        args.json.write_text(json.dumps(cases, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
