@@ -137,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     print("\nwrong scripts accepted (shuffled):")
     for c in cases:
         if c["kind"] == "shuffled" and c["outcome"] == "accepted":
-            print(f"  {c['line']} as {c['text'][:60]!r}: unexplained {c['unexplained']:.2f}, gap {c['gap']:.1f}")
+            print(f"  {c['line']} as {c['text'][:60]!r}: unexplained {c['unexplained']:.2f}, "
+                  f"gap {c['gap']:.1f}")
     seconds = [c["seconds"] / max(c["duration"], 1e-3) for c in cases if c["kind"] == "correct"]
     print(f"\nalignment time: {np.median(seconds):.3f} s per second of audio (median of correct lines)")
     if args.json:
