@@ -54,6 +54,14 @@ def spoken_words(text: str) -> list[str]:
     return DIRECTION.sub(" ", text).split()
 
 
+def snr_db(samples: np.ndarray, rate: int) -> float:
+    """How far the loud 10 ms frames stand above the quiet ones (90th vs 10th percentile of frame energy)."""
+    hop = max(1, rate // 100)
+    frames = samples[:len(samples) // hop * hop].reshape(-1, hop).astype(np.float64)
+    energy = (frames ** 2).mean(1) + 1e-12
+    return float(10 * np.log10(np.percentile(energy, 90) / np.percentile(energy, 10)))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sounds", type=Path, default=SOUNDS)
@@ -82,8 +90,11 @@ def main(argv: list[str] | None = None) -> int:
     scores: list[tuple[float, float]] = []
     check = align._check_match
 
+    per_word: list[list[float]] = []
+
     def recording(loud, words, gaps, free):
         scores.append(align.match_scores(loud, words, gaps, free))
+        per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
         return check(loud, words, gaps, free)
 
     align._check_match = recording
@@ -91,6 +102,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def run(kind: str, name: str, samples, rate, text: str) -> None:
         scores.clear()
+        per_word.clear()
         start = time.perf_counter()
         try:
             align.align(samples, rate, text)
@@ -100,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
         seconds = time.perf_counter() - start
         unexplained, gap = scores[-1] if scores else (float("nan"), float("nan"))
         cases.append({"kind": kind, "line": name, "text": text, "outcome": outcome, "why": why[:160],
-                      "unexplained": unexplained, "gap": gap, "seconds": round(seconds, 3),
+                      "unexplained": unexplained, "gap": gap, "word_gaps": per_word[-1] if per_word else [],
+                      "snr_db": round(snr_db(samples, rate), 1), "seconds": round(seconds, 3),
                       "duration": round(len(samples) / rate, 2)})
 
     try:

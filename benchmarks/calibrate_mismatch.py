@@ -27,11 +27,13 @@ CONDITIONS = [("clean", None)] + [(f"{kind} {snr} dB", (kind, snr)) for snr in (
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--clips", type=int, default=20)
+    parser.add_argument("--json", type=Path, help="write every run's scores (and the clip's SNR) here")
     args = parser.parse_args(argv)
 
     import csv
 
     from bench_batch import make_clips
+    from bench_mismatch import snr_db
 
     from facegen import align
     from facegen.audio import load_audio
@@ -43,14 +45,17 @@ def main(argv: list[str] | None = None) -> int:
     with open(folder / "lines.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     seen: list[tuple[float, float]] = []
+    per_word: list[list[float]] = []
     check = align._check_match
 
     def recording(loud, words, gaps, free):
         seen.append(align.match_scores(loud, words, gaps, free))
+        per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
         return check(loud, words, gaps, free)
 
     align._check_match = recording
     results = {"matching": [], "wrong": []}  # (condition, None = no alignment | (unexplained, gap), error)
+    dump = []
     for i, row in enumerate(rows):
         audio, rate = load_audio(folder / row["audio"])
         for name, noise in CONDITIONS:
@@ -58,13 +63,24 @@ def main(argv: list[str] | None = None) -> int:
             heard = audio if noise is None else add_noise(audio, noise[1], make_noise(audio, noise[0], rng))
             for kind, text in (("matching", row["text"]), ("wrong", rows[(i + 1) % len(rows)]["text"])):
                 seen.clear()
+                per_word.clear()
                 try:
                     align.align(heard, rate, text)
                     error = None
                 except FacegenError as exc:
                     error = str(exc)
                 results[kind].append((name, seen[0] if seen else None, error))
+                dump.append({"kind": kind, "condition": name, "line": row["audio"],
+                             "snr_db": snr_db(heard, rate),
+                             "unexplained": seen[0][0] if seen else float("nan"),
+                             "gap": seen[0][1] if seen else float("nan"),
+                             "word_gaps": per_word[0] if per_word else [], "why": error or "",
+                             "outcome": "refused" if error else "accepted"})
     align._check_match = check
+    if args.json:
+        import json
+
+        args.json.write_text(json.dumps(dump, indent=1))
 
     for kind, runs in results.items():
         gaps = [r[1][1] for r in runs if r[1] is not None and r[1][0] <= align.MAX_UNEXPLAINED]
