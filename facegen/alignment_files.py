@@ -3,7 +3,9 @@
 facegen reads Gentle, WhisperX and plain JSON, Praat/MFA TextGrid and CSV word lists (the format is recognised
 from the content), and writes plain JSON, TextGrid and CSV (the format follows the extension:
 `alignment_format` checks a name before any work). Each format's row in ALIGNMENT_FORMATS says whether facegen
-writes it and whether it carries phones.
+writes it and whether it carries phones; `read_phones` reads them where a file has them (CMU/ARPAbet phones:
+our JSON's "phones", Gentle's phones per word, a TextGrid's phones tier as MFA writes it). A file without them
+gets its phones aligned inside its word times (facegen.phone_timing).
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from pathlib import Path
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
-from facegen.phonetics import is_pause
+from facegen.phonetics import INDEX, SIL, is_pause
+from facegen.runtime import SILENT, Reporter
 from facegen.words import Word, check_word_rate, strip_edges
 
 TOLERANCE = 0.05  # how far (s) read times may run past the audio's end
@@ -37,9 +40,14 @@ class AlignmentFormat:
 
 
 ALIGNMENT_FORMATS = (AlignmentFormat("JSON", (".json",), writes=True, phones=True),  # alignment_json
-                     AlignmentFormat("Gentle JSON", (".json",)), AlignmentFormat("WhisperX JSON", (".json",)),
+                     AlignmentFormat("Gentle JSON", (".json",), phones=True),  # per word: "dh_B", durations
+                     AlignmentFormat("WhisperX JSON", (".json",)),
                      AlignmentFormat("TextGrid", (".TextGrid",), writes=True, phones=True),  # Praat, MFA
                      AlignmentFormat("CSV", (".csv",), writes=True))  # word,start,end
+Phone = tuple[str, float, float]  # (CMU phone without stress, start s, end s)
+# the phone label of a word its aligner could not pronounce (Kaldi's and MFA's spoken noise, Gentle's
+# out-of-vocabulary word): no phones for that word (they are aligned inside its time)
+UNPRONOUNCED = frozenset({"spn", "oov", "nsn"})
 
 
 def alignment_format(path: str | os.PathLike, phones: bool = False) -> AlignmentFormat:
@@ -67,15 +75,7 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
     negative, reversed or overlapping times; the error names the file and the problem.
     """
     path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_ALIGNMENT_BYTES:
-            raise FacegenError(f"alignment {path} is {size / 1e6:.0f} MB, far more than the word timings of "
-                               "any recording: check the path")
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise FacegenError(f"cannot read alignment {path} ({exc.strerror}): check the path") from exc
-    text = _decode_text(raw).lstrip()
+    text = _read_text(path)
     try:
         if _is_textgrid(path, text):
             words = _read_textgrid(text)
@@ -94,31 +94,100 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
     return words
 
 
-def read_phones(path: str | os.PathLike) -> list[tuple[str, float, float]] | None:
-    """The phones of an alignment file, (CMU phone, start, end): the "phones" list of our JSON or the `phones`
-    tier of a TextGrid (both as `facegen align --phones` writes them); None when the file has none."""
-    path = Path(path)
-    try:
-        text = _decode_text(path.read_bytes()).lstrip()
-        if _is_textgrid(path, text):
-            from praatio.utilities.textgrid_io import parseTextgridStr
+def read_phones(path: str | os.PathLike, duration: float | None = None,
+                reporter: Reporter = SILENT) -> list[Phone] | None:
+    """The phones of an alignment file, (CMU phone without stress, start, end) in seconds, pauses left out:
+    the "phones" list of our JSON (`facegen align --phones`), Gentle's phones per word ("dh_B", durations from
+    the word's start), or a TextGrid's phones tier ("phones" or MFA's "<speaker> - phones", ARPAbet with
+    stress digits: "AH0"). A word its aligner could not pronounce (MFA's "spn", Gentle's "oov") has none.
 
-            tiers = parseTextgridStr(text, includeEmptyIntervals=False)["tiers"]
-            found = [t for t in tiers
-                     if t["class"] == "IntervalTier" and t["name"].strip().lower() == "phones"]
-            return [(str(lab), float(a), float(b)) for a, b, lab in found[0]["entries"]] if found else None
-        data = json.loads(text) if text.startswith("{") else {}
-    except Exception as exc:  # praatio and json raise many types on bad files
-        raise FacegenError(f"cannot read phones from {path} ({exc}): write it with "
-                           "`facegen align --phones`") from exc
-    phones = data.get("phones") if isinstance(data, dict) else None
-    if phones is None:
-        return None
+    None when the file has no phones, or phones that are not CMU/ARPAbet (e.g. MFA's IPA models: a note says
+    so). Like `read_alignment`, negative, reversed or (with `duration`) late times are a FacegenError.
+    """
+    path = Path(path)
+    text = _read_text(path)
     try:
-        return [(str(p["phone"]), float(p["start"]), float(p["end"])) for p in phones]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise FacegenError(f"the phones of {path} are malformed ({exc}): write it with "
-                           "`facegen align --phones`") from exc
+        if _is_textgrid(path, text):
+            labelled = _textgrid_phones(text)
+        elif text.startswith(("{", "[")):
+            labelled = _json_phones(json.loads(text))
+        else:
+            labelled = None  # CSV: words only
+    except RecursionError as exc:
+        raise FacegenError(f"alignment {path} is nested too deeply to be word timings: write it as Gentle/"
+                           "WhisperX/plain JSON, a TextGrid or a CSV with word,start,end columns") from exc
+    except (ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
+        raise FacegenError(f"the phones of {path} are malformed ({exc}): fix the file or align "
+                           "again") from exc
+    return None if labelled is None else _cmu_phones(labelled, path, duration, reporter)
+
+
+def _json_phones(data: object) -> list[tuple[str, float, float]] | None:
+    """Our JSON's "phones" list, or Gentle's phones per timed word; None when neither is there."""
+    if isinstance(data, dict) and "phones" in data:
+        if not isinstance(data["phones"], list):
+            raise TypeError("'phones' is not a list")
+        return [(str(p["phone"]), _seconds(p["start"]), _seconds(p["end"])) for p in data["phones"]]
+    items = data.get("words") if isinstance(data, dict) else data
+    if not isinstance(items, list) or not any(isinstance(it, dict) and "phones" in it for it in items):
+        return None
+    phones = []
+    for item in items:  # Gentle: each aligned word's phones, one after the other from its start
+        if not isinstance(item, dict) or item.get("case", "success") != "success" or "start" not in item:
+            continue
+        at = _seconds(item["start"])
+        for phone in item.get("phones") or []:
+            end = at + _seconds(phone["duration"])
+            phones.append((re.sub(r"_[BIES]$", "", str(phone["phone"])), at, end))  # Kaldi's word position
+            at = end
+    return phones
+
+
+def _textgrid_phones(text: str) -> list[tuple[str, float, float]] | None:
+    """The phones tier beside the words tier `_read_textgrid` reads (MFA: "<speaker> - phones" beside
+    "<speaker> - words"); None without one."""
+    tiers = _interval_tiers(text)
+    words = _words_tier(tiers)
+    prefix = re.sub(r"words?$", "", words["name"].strip(), flags=re.IGNORECASE)
+    named = [t for t in tiers if re.fullmatch(r"phones?", t["name"].strip().removeprefix(prefix).lower())]
+    named = named or [t for t in tiers if re.search(r"\bphones?$", t["name"].strip().lower())]
+    return [(str(label), _seconds(a), _seconds(b)) for a, b, label in named[0]["entries"]] if named else None
+
+
+def _cmu_phones(labelled: list[tuple[str, float, float]], path: Path, duration: float | None,
+                reporter: Reporter) -> list[Phone] | None:
+    """CMU phones from a file's labels: stress digits and case dropped, pauses and unpronounced words left
+    out, times checked; None (and a note) when a label is no CMU phone."""
+    phones: list[Phone] = []
+    for label, start, end in labelled:
+        name = label.strip()
+        if end < start or start < 0 or (duration is not None and end > duration + TOLERANCE):
+            problem = ("has a negative time" if start < 0 else "ends before it starts" if end < start
+                       else f"ends after the audio's end at {duration:g} s")
+            raise FacegenError(f"alignment {path}: phone {name!r} {problem} ({start:g}-{end:g} s): fix the "
+                               "file or align again")
+        if is_pause(name) or name.lower() in UNPRONOUNCED:
+            continue
+        cmu = name.upper().rstrip("012")
+        if cmu not in INDEX or cmu == SIL:
+            reporter.note(f"the phones of {path} are not CMU/ARPAbet phones ({name!r}): they are left out, "
+                          "and the phones are aligned inside its word times")
+            return None
+        phones.append((cmu, start, end))
+    return phones
+
+
+def _read_text(path: Path) -> str:
+    """The text of an alignment file (at most MAX_ALIGNMENT_BYTES), leading spaces dropped."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_ALIGNMENT_BYTES:
+            raise FacegenError(f"alignment {path} is {size / 1e6:.0f} MB, far more than the word timings of "
+                               "any recording: check the path")
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FacegenError(f"cannot read alignment {path} ({exc.strerror}): check the path") from exc
+    return _decode_text(raw).lstrip()
 
 
 def _decode_text(raw: bytes) -> str:
@@ -212,9 +281,8 @@ _TEXTGRID_HEADER = re.compile(r'File type = "ooTextFile"\s+Object class = "TextG
 _NEGATIVE_TIME = re.compile(r"^\s*(?:(?:xmin|xmax|number)\s*=\s*)?(-[\d.]+)\s*$", re.MULTILINE)
 
 
-def _read_textgrid(text: str) -> list[Word]:
-    """Praat TextGrid, long or short text format (parsed by praatio): the `words` tier, else the first
-    interval tier."""
+def _interval_tiers(text: str) -> list[dict]:
+    """The interval tiers of a Praat TextGrid, long or short text format (parsed by praatio)."""
     from praatio.utilities.errors import PraatioException
     from praatio.utilities.textgrid_io import parseTextgridStr
 
@@ -229,9 +297,19 @@ def _read_textgrid(text: str) -> list[Word]:
     intervals = [t for t in tiers if t["class"] == "IntervalTier"]
     if not intervals:
         raise ValueError("no interval tier")
-    named = [t for t in intervals if re.search(r"\bwords?$", t["name"].strip().lower())]  # MFA: "spk - words"
+    return intervals
+
+
+def _words_tier(tiers: list[dict]) -> dict:
+    """The first tier named words (MFA: "<speaker> - words"), else the first tier."""
+    named = [t for t in tiers if re.search(r"\bwords?$", t["name"].strip().lower())]
+    return (named or tiers)[0]
+
+
+def _read_textgrid(text: str) -> list[Word]:
+    """Praat TextGrid: the `words` tier, else the first interval tier."""
     words = []
-    for start, end, label in (named or intervals)[0]["entries"]:
+    for start, end, label in _words_tier(_interval_tiers(text))["entries"]:
         word = _word(label, start, end)
         if word:
             words.append(word)
