@@ -21,6 +21,7 @@ from pathlib import Path
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
+from facegen.input_files import read_input
 from facegen.phonetics import INDEX, SIL, is_pause
 from facegen.runtime import SILENT, Reporter
 from facegen.words import Word, check_word_rate, strip_edges
@@ -178,15 +179,10 @@ def _cmu_phones(labelled: list[tuple[str, float, float]], path: Path, duration: 
 
 
 def _read_text(path: Path) -> str:
-    """The text of an alignment file (at most MAX_ALIGNMENT_BYTES), leading spaces dropped."""
-    try:
-        size = path.stat().st_size
-        if size > MAX_ALIGNMENT_BYTES:
-            raise FacegenError(f"alignment {path} is {size / 1e6:.0f} MB, far more than the word timings of "
-                               "any recording: check the path")
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise FacegenError(f"cannot read alignment {path} ({exc.strerror}): check the path") from exc
+    """The text of an alignment file (a regular file of at most MAX_ALIGNMENT_BYTES), leading spaces
+    dropped."""
+    raw = read_input(path, what="alignment", limit=MAX_ALIGNMENT_BYTES, param="alignment",
+                     too_big="far more than the word timings of any recording; check the path")
     return _decode_text(raw).lstrip()
 
 

@@ -40,14 +40,15 @@ def protect_inputs(outputs: list, **inputs) -> None:
 
 
 def read_text(text: str | None, text_file: str | None) -> str | None:
-    """The transcript given inline (--text) or read from a UTF-8 file (--text-file)."""
+    """The transcript given inline (--text) or read from a UTF-8 file (--text-file): a regular file of at
+    most input_files.TRANSCRIPT_BYTES (a FIFO, a device or a larger file is refused at once)."""
     if text_file is None:
         return text
-    try:
-        return Path(text_file).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FacegenError(f"cannot read transcript file {text_file} ({exc}): "
-                           "pass a UTF-8 text file") from exc
+    from facegen.input_files import TRANSCRIPT_BYTES, read_input_text
+
+    return read_input_text(text_file, what="transcript file", limit=TRANSCRIPT_BYTES,
+                           fix="pass a UTF-8 text file", param="text",
+                           too_big="split the recording and its transcript into parts")
 
 
 def one_of(**options) -> None:
