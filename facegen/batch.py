@@ -13,6 +13,7 @@ import csv
 import io
 import json
 import os
+import re
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from facegen.align_ahead import Aligned
 from facegen.animator import BATCH_SIZE, Animator
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension, write_animation
+from facegen.input_files import MANIFEST_BYTES, TRANSCRIPT_BYTES, read_input_text
 from facegen.runtime import SILENT, Reporter
 
 
@@ -35,7 +37,8 @@ class Job:
     manifest line the job comes from (0: not from a manifest); `problem` is why the row cannot run (e.g. an
     unreadable transcript file), reported as its error without stopping the others; `aligned` is the forced
     alignment of `text` when it was done already (align_ahead.Aligned: engines.run_local's main process aligns
-    waiting items while its workers start), else the worker aligns."""
+    waiting items while its workers start), else the worker aligns. `text_file` (where `text` was read from)
+    and `manifest` are inputs too: no output may replace them (batch_plan.check_plan)."""
 
     audio: Path
     output: Path
@@ -47,6 +50,8 @@ class Job:
     outputs: tuple[Path, ...] = ()
     problem: str | None = None
     aligned: Aligned | None = None
+    text_file: Path | None = None
+    manifest: Path | None = None
 
     @property
     def targets(self) -> tuple[Path, ...]:
@@ -85,6 +90,9 @@ class JobResult:
 
 
 MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output")
+PATH_COLUMNS = ("audio", "text_file", "alignment", "output")
+MAX_SPEAKER_CHARS = 100  # a speaker's name or index
+ROW_DEPTH = 3  # brackets a JSON manifest nests: {"jobs": [{row}]}
 
 
 def one_line(exc: BaseException) -> str:
@@ -103,14 +111,17 @@ def read_manifest(path: str | os.PathLike, outdir: str | os.PathLike | None = No
     With `formats` (extensions such as ".usdc", ".glb"), each job writes its output's stem in every one of
     them. A row with neither text nor alignment has its words recognised (as `facegen animate` without
     --text). A malformed manifest is a FacegenError naming the line; a transcript file that cannot be read
-    makes only its row fail (`Job.problem`).
+    makes only its row fail (`Job.problem`). The manifest and the transcript files are read as
+    facegen.input_files reads: regular files of a bounded size (no FIFO, device or folder).
     """
     path = Path(path)
+    raw = read_input_text(path, what="manifest", limit=MANIFEST_BYTES, fix="pass a UTF-8 CSV or JSON file",
+                          too_big="split it into several manifests", encoding="utf-8-sig")
     try:
-        raw = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FacegenError(f"cannot read manifest {path} ({exc}): pass a UTF-8 CSV or JSON file") from exc
-    rows = _json_rows(raw, path) if raw.lstrip().startswith(("[", "{")) else _csv_rows(raw, path)
+        rows = _json_rows(raw, path) if raw.lstrip().startswith(("[", "{")) else _csv_rows(raw, path)
+    except RecursionError as exc:
+        raise FacegenError(f"manifest {path}, line {_too_deep(raw)}: objects or lists nested too deeply: a "
+                           "row is one object of strings and numbers") from exc
     for ext in formats or ():
         format_of_extension(ext)
     base = path.parent
@@ -155,11 +166,36 @@ def _check_columns(names: list[str], path: Path, line: int) -> None:
                            "one")
 
 
+class _Object(dict):
+    """A JSON object as its pairs in file order (`pairs`: a key given twice stays twice, for the check)."""
+
+    def __init__(self, pairs: list[tuple[str, object]]) -> None:
+        super().__init__(pairs)
+        self.pairs = pairs
+
+
+# integers stay text (a row's values are text anyway): a 5,000-digit number is not converted, so no limit hit
+_DECODER = json.JSONDecoder(parse_int=str, object_pairs_hook=_Object)
+
+
+def _too_deep(raw: str) -> int:
+    """The line of the first bracket a JSON manifest nests deeper than a manifest's rows (1: none found)."""
+    depth = 0
+    for token in re.finditer(r'"(?:[^"\\]|\\.)*"|[\[\]{}]', raw):
+        if token[0] in "[{":
+            depth += 1
+            if depth > ROW_DEPTH:
+                return _line_of(raw, token.start())
+        elif token[0] in "]}":
+            depth -= 1
+    return 1
+
+
 def _json_rows(raw: str, path: Path) -> list[tuple[int, dict]]:
     """(line, object) for a JSON list, {"jobs": [...]} or JSON lines."""
-    decoder = json.JSONDecoder()
+    decoder = _DECODER
     try:
-        data = json.loads(raw)
+        data = decoder.decode(raw)
     except json.JSONDecodeError as exc:
         first = raw.lstrip().splitlines()[0] if raw.strip() else ""
         if exc.msg == "Extra data" and first.startswith("{"):
@@ -199,7 +235,7 @@ def _json_lines(raw: str, path: Path) -> list[tuple[int, dict]]:
         if not text.strip():
             continue
         try:
-            item = json.loads(text)
+            item = _DECODER.decode(text)
         except json.JSONDecodeError as exc:
             raise FacegenError(f"manifest {path}, line {n}: not valid JSON ({exc.msg}): one object per "
                                "line") from exc
@@ -221,13 +257,13 @@ def _object(item, path: Path, line: int) -> dict:
     if not isinstance(item, dict):
         raise FacegenError(f"manifest {path}, line {line}: expected an object with audio, text, output, ... "
                            f"but found {type(item).__name__}")
-    row = {}
-    for key, value in item.items():
+    pairs = item.pairs if isinstance(item, _Object) else list(item.items())
+    for key, value in pairs:
         if isinstance(value, (dict, list)):
             raise FacegenError(f"manifest {path}, line {line}: {key} must be a string or number")
-        row[str(key).strip().lower()] = "" if value is None else str(value)
-    _check_columns(list(row), path, line)
-    return row
+    names = [str(key).strip().lower() for key, _ in pairs]
+    _check_columns(names, path, line)  # "audio" and "Audio" are one column given twice
+    return {name: "" if value is None else str(value) for name, (_, value) in zip(names, pairs, strict=True)}
 
 
 def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_ext: str,
@@ -236,16 +272,31 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
     where = f"manifest {path}, line {line}"
     if not row.get("audio"):
         raise FacegenError(f"{where}: no audio file given")
+    for column in PATH_COLUMNS:
+        if "\0" in row.get(column, ""):
+            raise FacegenError(f"{where}: the {column} path contains a NUL byte, which no file name can: fix "
+                               "that field")
+    speaker = row.get("speaker") or None
+    if speaker is not None and len(speaker) > MAX_SPEAKER_CHARS:
+        size = f"a {len(speaker)}-digit number" if speaker.isdigit() else f"{len(speaker)} characters long"
+        raise FacegenError(f"{where}: the speaker {speaker[:12]}... is {size}: give a speaker's name or "
+                           "index")
     given = [k for k in ("text", "text_file", "alignment") if row.get(k)]
     if len(given) > 1:
         raise FacegenError(f"{where}: give one of text, text_file or alignment, not {' and '.join(given)}")
     text, problem = row.get("text") or None, None
-    if row.get("text_file"):
+    text_file = base / row["text_file"] if row.get("text_file") else None
+    if text_file is not None:
         try:
-            text = (base / row["text_file"]).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            problem = f"cannot read transcript file {row['text_file']} ({exc}): fix the path or the file"
-    output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
+            text = read_input_text(text_file, what="transcript file", limit=TRANSCRIPT_BYTES,
+                                   name=row["text_file"], fix="fix the path or the file",
+                                   too_big="split the recording and its transcript into parts")
+        except FacegenError as exc:
+            problem = str(exc)
+    try:
+        output = row.get("output") or Path(row["audio"]).with_suffix(default_ext).name
+    except ValueError:  # "/": no name to give the output
+        raise FacegenError(f"{where}: the audio path {row['audio']} names no file: fix that field") from None
     try:
         format_of(output)
     except FacegenError as exc:
@@ -254,7 +305,8 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
     outputs = tuple(out.with_suffix(ext) for ext in formats) if formats else ()
     return Job(audio=base / row["audio"], output=outputs[0] if outputs else out, text=text,
                alignment=base / row["alignment"] if row.get("alignment") else None,
-               speaker=row.get("speaker") or None, line=line, outputs=outputs, problem=problem)
+               speaker=speaker, line=line, outputs=outputs, problem=problem, text_file=text_file,
+               manifest=path)
 
 
 def animate_many(jobs: Iterable[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,

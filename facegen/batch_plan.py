@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,60 +21,104 @@ from facegen.atomic import atomic_path
 from facegen.batch import Job, JobResult
 from facegen.errors import FacegenError
 from facegen.exchange.wav import sidecar_path
+from facegen.input_files import open_input, read_input
 
 STATE_NAME = ".facegen-batch.json"
 REPORT_NAMES = ("report.json", "report.xml")
 STATE_VERSION = 1
+STATE_BYTES = 256 << 20  # a run state larger than this is not ours: everything runs
 
 
-def _key(path: Path) -> str:
-    return os.path.normcase(os.path.abspath(path))
+def _folded(path: str | os.PathLike) -> str:
+    """A path as case-insensitive file systems (macOS, Windows) compare names: Unicode's canonical caseless
+    form, NFD(casefold(NFD(path))), so that `Lines.csv` is `lines.csv` and an "é" of one code point is the "é"
+    of two. Used on every file system: a plan refused on macOS is refused on Linux too."""
+    return unicodedata.normalize("NFD", unicodedata.normalize("NFD", os.fspath(path)).casefold())
+
+
+def _entry(path: str | os.PathLike) -> Path:
+    """The directory entry that writing `path` replaces: its folder with every symbolic link (and "..")
+    resolved, and its name. Outputs are written as temporaries renamed onto the name, so a link at the name
+    itself is replaced, not followed."""
+    path = Path(path)
+    return Path(os.path.realpath(path.parent), path.name)
+
+
+def _note(a: str | os.PathLike, b: str | os.PathLike) -> str:
+    """What to add when two paths that are one file differ as written (only in case or Unicode form)."""
+    if os.fspath(a) == os.fspath(b):
+        return ""
+    return f" ({a} and {b} are one file where names are compared without case, as on macOS and Windows)"
 
 
 def check_plan(jobs: list[Job], out_dir: str | os.PathLike) -> None:
     """Refuse, before any work, a plan that would lose or misplace a clip (a FacegenError naming the
-    lines)."""
-    out = Path(os.path.abspath(out_dir))
-    reserved = {_key(out / name): name for name in (*REPORT_NAMES, STATE_NAME)}
-    inputs: dict[str, int] = {}
+    lines): an output that leaves `out_dir` once symbolic links are followed, that is one of the run's inputs
+    (the manifest, a row's audio, alignment or transcript file, also when one is a link to it), the batch's
+    own reports or state, or another row's output or audio sidecar. Names are compared case-folded and
+    Unicode-normalised (`_folded`)."""
+    out = Path(os.path.realpath(out_dir))
+    reserved = {_folded(out / name): name for name in (*REPORT_NAMES, STATE_NAME)}
+    for name in (*REPORT_NAMES, STATE_NAME):
+        if (out / name).is_dir():
+            raise FacegenError(f"{out_dir} has a folder {name}, where the batch writes its {name}: remove or "
+                               "rename that folder, or choose another output folder")
+    inputs: dict[str, tuple[int, str, Path]] = {}  # folded path -> (line, what it is, the entry)
+    own_audio: set[tuple[str, int]] = set()  # (folded path, line): a row's sidecar may be its own audio
     for job in jobs:
-        for source in (job.audio, job.alignment):
-            if source is not None:
-                inputs.setdefault(_key(source), job.line)
-    written: dict[str, int] = {}
-    sidecars: dict[str, int] = {}
+        sources = (("audio", job.audio), ("alignment", job.alignment), ("transcript file", job.text_file),
+                   ("manifest", job.manifest))
+        for what, source in sources:
+            if source is not None:  # the name, and the file it links to
+                for path in (_entry(source), Path(os.path.realpath(source))):
+                    inputs.setdefault(_folded(path), (0 if what == "manifest" else job.line, what, path))
+                    if what == "audio":
+                        own_audio.add((_folded(path), job.line))
+    written: dict[str, tuple[int, Path]] = {}
+    sidecars: dict[str, tuple[int, Path]] = {}
     for job in jobs:
         where = f"manifest line {job.line}"
         for target in job.targets:
-            path = Path(os.path.abspath(target))
+            path = _entry(target)
             if not path.is_relative_to(out):
+                if Path(os.path.abspath(target)).is_relative_to(os.path.abspath(out_dir)):
+                    raise FacegenError(f"{where}: output {target} leads outside the output folder {out_dir}, "
+                                       f"to {path}, through a symbolic link: write inside it, or remove the "
+                                       "link")
                 raise FacegenError(f"{where}: output {target} is outside the output folder {out_dir}: give a "
                                    "relative path inside it (no '..', not absolute)")
-            key = _key(path)
+            key = _folded(path)
             if key in reserved:
-                raise FacegenError(f"{where}: output {target} is the batch's own {reserved[key]}: rename the "
-                                   "output")
+                raise FacegenError(f"{where}: output {target} is the batch's own {reserved[key]}"
+                                   f"{_note(path, out / reserved[key])}: rename the output")
             if key in written:
-                raise FacegenError(f"{where}: output {target} is also the output of line {written[key]}: "
-                                   "give every row its own output")
+                line, other = written[key]
+                raise FacegenError(f"{where}: output {target} is also the output of line {line}"
+                                   f"{_note(path, other)}: give every row its own output")
             if key in inputs:
-                raise FacegenError(f"{where}: output {target} is an input of line {inputs[key]}: writing it "
+                line, what, source = inputs[key]
+                whose = "the manifest" if what == "manifest" else f"an input of line {line} (its {what})"
+                raise FacegenError(f"{where}: output {target} is {whose}{_note(path, source)}: writing it "
                                    "would destroy that input; choose another output name")
-            written[key] = job.line
-            wav = _key(sidecar_path(path))
-            if sidecars.setdefault(wav, job.line) != job.line:
+            written[key] = (job.line, path)
+            wav = sidecar_path(path)
+            line, other = sidecars.setdefault(_folded(wav), (job.line, wav))
+            if line != job.line:
                 raise FacegenError(f"{where}: output {target} shares its audio sidecar "
-                                   f"{sidecar_path(target).name} with line {sidecars[wav]} (same folder and "
-                                   "name): give the rows different names")
-            if wav in inputs and inputs[wav] != job.line:
-                raise FacegenError(f"{where}: the audio sidecar of {target} would overwrite the audio of "
-                                   f"line {inputs[wav]}: choose another output name")
+                                   f"{sidecar_path(target).name} with line {line}{_note(wav, other)} (same "
+                                   "folder and name): give the rows different names")
+            if _folded(wav) in inputs and (_folded(wav), job.line) not in own_audio:  # its own: not rewritten
+                line, what, source = inputs[_folded(wav)]
+                whose = "the manifest" if what == "manifest" else f"the {what} of line {line}"
+                raise FacegenError(f"{where}: the audio sidecar of {target} would overwrite {whose}"
+                                   f"{_note(wav, source)}: choose another output name")
 
 
 def file_hash(path: str | os.PathLike) -> str:
-    """The SHA-256 of a file's bytes (read in blocks)."""
+    """The SHA-256 of a regular file's bytes (read in blocks); anything else (a FIFO, a device, a folder) is
+    an OSError at once (input_files.open_input)."""
     digest = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_input(path) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
@@ -82,7 +127,10 @@ def file_hash(path: str | os.PathLike) -> str:
 def item_key(job: Job, out_dir: str | os.PathLike, options: dict) -> str:
     """The content key of a job: its audio and transcript/alignment bytes, speaker, outputs and `options`
     (the model's hash, the text model, anything else that changes the result) and facegen's version.
-    An input that cannot be read is a FacegenError (that item's error)."""
+    An input that cannot be read is a FacegenError (that item's error), as is a row that cannot run
+    (`Job.problem`, e.g. its transcript file is a FIFO): it never goes to a worker."""
+    if job.problem:
+        raise FacegenError(job.problem)
     try:
         audio = file_hash(job.audio)
         words = file_hash(job.alignment) if job.alignment is not None else None
@@ -112,8 +160,8 @@ class RunState:
         """The state recorded in `out_dir` (empty when there is none or it is unreadable: everything runs)."""
         state = cls(Path(out_dir))
         try:
-            data = json.loads(state.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            data = json.loads(read_input(state.path, what="run state", limit=STATE_BYTES, too_big="-"))
+        except (FacegenError, ValueError, RecursionError):  # also a FIFO or a device put there
             return state
         if isinstance(data, dict) and data.get("version") == STATE_VERSION and isinstance(data.get("items"),
                                                                                           dict):
@@ -126,9 +174,9 @@ class RunState:
     def unchanged(self, job: Job, key: str) -> bool:
         """True when `job` was done with this `key` and its files are as it left them."""
         entry = self.items.get(self.name(job))
-        if not isinstance(entry, dict) or entry.get("key") != key:
+        if not isinstance(entry, dict) or entry.get("key") != key or not isinstance(entry.get("files"), dict):
             return False
-        return all(_stamp(self.out_dir / f) == stamp for f, stamp in entry.get("files", {}).items())
+        return all(_stamp(self.out_dir / f) == stamp for f, stamp in entry["files"].items())
 
     def record(self, result: JobResult, key: str) -> None:
         """Note a finished item: a passed one is done, a skipped one stays done; any other is forgotten (it
