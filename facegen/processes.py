@@ -20,14 +20,66 @@ from facegen.errors import FacegenError
 
 def start_process(target: Callable, args: tuple = (), *, start: str = "fork", name: str | None = None):
     """A started daemon multiprocessing.Process running target(*args) (the forked alignment started ahead),
-    or None where `start` is not available; its pipe: multiprocessing.Pipe."""
+    or None where `start` is not available; its pipe: multiprocessing.Pipe. It ends when this process ends,
+    even by SIGKILL (`die_with`)."""
     import multiprocessing
 
     if start not in multiprocessing.get_all_start_methods():
         return None
-    process = multiprocessing.get_context(start).Process(target=target, args=args, daemon=True, name=name)
+    process = multiprocessing.get_context(start).Process(target=_owned, args=(os.getpid(), target, args),
+                                                         daemon=True, name=name)
     process.start()
     return process
+
+
+def _owned(owner: int, target: Callable, args: tuple) -> None:
+    die_with(owner)
+    target(*args)
+
+
+def die_with(owner: int, grace: float = 2.0) -> None:
+    """End this process when the process `owner` ends, however it ends (SIGKILL too): SIGTERM (its handler
+    unwinds the atomic writes), then SIGKILL `grace` s later. Without this, a pool's workers outlive a killed
+    parent, waiting for work for ever (each holds both ends of its task queue), and a forkserver lives as long
+    as its workers. A daemon thread watches: on a pidfd, readable when `owner` exits (Linux >= 5.3), else by
+    looking twice a second (whether this process's parent is still `owner`, or `owner` still exists)."""
+    import threading
+
+    try:
+        handle = os.pidfd_open(owner)
+    except ProcessLookupError:
+        handle = -1  # gone already
+    except (AttributeError, OSError):  # no pidfd here (macOS, Windows, an old kernel, a sandbox)
+        handle = None
+        if owner != os.getppid() and os.name == "nt":
+            return  # no safe way to ask whether it exists (os.kill(pid, 0) would end it)
+    threading.Thread(target=_watch, args=(owner, handle, grace), daemon=True, name="facegen-die-with").start()
+
+
+def _watch(owner: int, handle: int | None, grace: float) -> None:
+    import select
+    import signal
+    import time
+
+    if handle is not None and handle >= 0:
+        select.select([handle], [], [])
+    elif handle is None:
+        parent = owner == os.getppid()
+        while os.getppid() == owner if parent else _exists(owner):
+            time.sleep(0.5)
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(grace)
+    os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
 
 
 class ProcessPool:
@@ -53,7 +105,7 @@ class ProcessPool:
         self._server = context.RawValue("i", 0) if start == "forkserver" else None
         self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=self._context,
                                             initializer=_start_worker,
-                                            initargs=(self._server, initializer, initargs),
+                                            initargs=(self._server, os.getpid(), initializer, initargs),
                                             max_tasks_per_child=max_tasks_per_child)
 
     def submit(self, fn: Callable, /, *args, **kwargs):
@@ -89,7 +141,8 @@ def process_pool(workers: int, *, start: str = "spawn", initializer: Callable | 
     """The one process-pool factory of facegen: `workers` processes, each running initializer(*initargs)
     first. start="forkserver" (Linux; spawn elsewhere): forked from a server that imported `preload` once
     (torch, USD, the aligner's decoders); "spawn": fresh interpreters (`max_tasks_per_child=1`: a fresh
-    one per task, for state no library resets, such as libespeak-ng's)."""
+    one per task, for state no library resets, such as libespeak-ng's). The workers end when this process
+    ends, even by SIGKILL (`die_with`); a forkserver ends with its last worker."""
     if start not in ("forkserver", "spawn"):
         raise ValueError(f"unknown start method {start!r} for a process pool: forkserver or spawn")
     return ProcessPool(workers, start, initializer, initargs, preload, max_tasks_per_child)
@@ -110,8 +163,10 @@ class _Recording:
         return process
 
 
-def _start_worker(server, initializer: Callable | None, initargs: tuple) -> None:
-    """In a new pool worker: note the forkserver's id (this worker's parent), then run the initializer."""
+def _start_worker(server, owner: int, initializer: Callable | None, initargs: tuple) -> None:
+    """In a new pool worker: die with the pool's `owner` (die_with), note the forkserver's id (this worker's
+    parent), then run the initializer."""
+    die_with(owner)
     if server is not None:
         server.value = os.getppid()
     if initializer is not None:
