@@ -37,12 +37,14 @@ def _owned(owner: int, target: Callable, args: tuple) -> None:
     target(*args)
 
 
-def die_with(owner: int, grace: float = 2.0) -> None:
+def die_with(owner: int, grace: float = 1.0, server: int | None = None) -> None:
     """End this process when the process `owner` ends, however it ends (SIGKILL too): SIGTERM (its handler
-    unwinds the atomic writes), then SIGKILL `grace` s later. Without this, a pool's workers outlive a killed
-    parent, waiting for work for ever (each holds both ends of its task queue), and a forkserver lives as long
-    as its workers. A daemon thread watches: on a pidfd, readable when `owner` exits (Linux >= 5.3), else by
-    looking twice a second (whether this process's parent is still `owner`, or `owner` still exists)."""
+    unwinds the atomic writes), then SIGKILL `grace` s later; `server`, this process's parent forkserver, is
+    SIGKILLed at once (it holds nothing, and its teardown of torch and USD would take a second). Without this,
+    a pool's workers outlive a killed parent, waiting for work for ever (each holds both ends of its task
+    queue), and a forkserver lives as long as its workers. A daemon thread watches: on a pidfd, readable when
+    `owner` exits (Linux >= 5.3), else by looking twice a second (whether this process's parent is still
+    `owner`, or `owner` still exists)."""
     import threading
 
     try:
@@ -53,10 +55,11 @@ def die_with(owner: int, grace: float = 2.0) -> None:
         handle = None
         if owner != os.getppid() and os.name == "nt":
             return  # no safe way to ask whether it exists (os.kill(pid, 0) would end it)
-    threading.Thread(target=_watch, args=(owner, handle, grace), daemon=True, name="facegen-die-with").start()
+    threading.Thread(target=_watch, args=(owner, handle, grace, server), daemon=True,
+                     name="facegen-die-with").start()
 
 
-def _watch(owner: int, handle: int | None, grace: float) -> None:
+def _watch(owner: int, handle: int | None, grace: float, server: int | None) -> None:
     import select
     import signal
     import time
@@ -67,6 +70,8 @@ def _watch(owner: int, handle: int | None, grace: float) -> None:
         parent = owner == os.getppid()
         while os.getppid() == owner if parent else _exists(owner):
             time.sleep(0.5)
+    if server is not None and os.getppid() == server:  # still our parent: not another process by now
+        os.kill(server, getattr(signal, "SIGKILL", signal.SIGTERM))
     os.kill(os.getpid(), signal.SIGTERM)
     time.sleep(grace)
     os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
@@ -166,7 +171,7 @@ class _Recording:
 def _start_worker(server, owner: int, initializer: Callable | None, initargs: tuple) -> None:
     """In a new pool worker: die with the pool's `owner` (die_with), note the forkserver's id (this worker's
     parent), then run the initializer."""
-    die_with(owner)
+    die_with(owner, server=os.getppid() if server is not None else None)
     if server is not None:
         server.value = os.getppid()
     if initializer is not None:
