@@ -21,7 +21,7 @@ from pathlib import Path
 
 from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
-from facegen.input_files import read_input
+from facegen.input_files import check_input, read_input
 from facegen.phonetics import INDEX, SIL, is_pause
 from facegen.runtime import SILENT, Reporter
 from facegen.words import Word, check_word_rate, strip_edges
@@ -178,12 +178,20 @@ def _cmu_phones(labelled: list[tuple[str, float, float]], path: Path, duration: 
     return phones
 
 
+_AS_FILE = {"what": "alignment", "limit": MAX_ALIGNMENT_BYTES, "param": "alignment",
+            "too_big": "far more than the word timings of any recording; check the path"}
+
+
+def check_alignment_file(path: str | os.PathLike) -> None:
+    """Refuse now, without reading it, a path read_alignment could not read (missing, a FIFO, a device, a
+    folder, larger than MAX_ALIGNMENT_BYTES): a front end checks it before it loads a model."""
+    check_input(path, **_AS_FILE)
+
+
 def _read_text(path: Path) -> str:
     """The text of an alignment file (a regular file of at most MAX_ALIGNMENT_BYTES), leading spaces
     dropped."""
-    raw = read_input(path, what="alignment", limit=MAX_ALIGNMENT_BYTES, param="alignment",
-                     too_big="far more than the word timings of any recording; check the path")
-    return _decode_text(raw).lstrip()
+    return _decode_text(read_input(path, **_AS_FILE)).lstrip()
 
 
 def _decode_text(raw: bytes) -> str:
