@@ -40,22 +40,27 @@ BOMBS = {  # as tests/test_safe_inputs.py
 }
 
 
+# the command as a child of a small process (its fork does not count this one's memory), its own peak RSS
+MEASURE = """
+import os, subprocess, sys, time
+proc = subprocess.Popen(sys.argv[2:], stdout=subprocess.DEVNULL)
+end = time.monotonic() + float(sys.argv[1])
+while not (done := os.wait4(proc.pid, os.WNOHANG))[0]:
+    if time.monotonic() > end:
+        proc.kill()
+    time.sleep(0.01)
+print(done[2].ru_maxrss / 1024)
+sys.exit(os.waitstatus_to_exitcode(done[1]) % 256)
+"""
+
+
 def run(args: list[str], timeout: float = 120.0) -> tuple[int, str, float, float]:
     """(exit code, stderr, wall s, peak RSS MB) of `args` as a new process, killed after `timeout` s."""
-    with tempfile.TemporaryFile() as err:
-        start = time.perf_counter()
-        proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=err, cwd=REPO,
-                                env=dict(os.environ, HF_HUB_OFFLINE="1"))
-        while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                break
-            if time.perf_counter() - start > timeout:
-                proc.kill()
-            time.sleep(0.01)
-        err.seek(0)
-        return (os.waitstatus_to_exitcode(status), err.read().decode(errors="replace"),
-                time.perf_counter() - start, usage.ru_maxrss / 1024)
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", MEASURE, str(timeout), *args], capture_output=True,
+                          text=True, cwd=REPO, env=dict(os.environ, HF_HUB_OFFLINE="1"), timeout=timeout + 60,
+                          check=False)
+    return done.returncode, done.stderr, time.perf_counter() - start, float(done.stdout)
 
 
 def cases(folder: Path, wav: Path, fifo: Path) -> dict[str, tuple[list[str], float]]:
@@ -65,7 +70,10 @@ def cases(folder: Path, wav: Path, fifo: Path) -> dict[str, tuple[list[str], flo
     for name, data in BOMBS.items():
         path = folder / f"bomb{len(found)}.pkl"
         path.write_bytes(data)
-        code = f"from facegen.datasets.templates import read_templates_pkl; read_templates_pkl({str(path)!r})"
+        code = ("import sys\nfrom facegen.datasets.templates import read_templates_pkl\n"
+                "from facegen.errors import FacegenError\n"
+                f"try:\n    read_templates_pkl({str(path)!r})\nexcept FacegenError as exc:\n"
+                "    sys.exit(f'facegen: {exc}')")
         found[f"{name} ({len(data)} B)"] = ([sys.executable, "-c", code], 1.0)
     for special in (str(fifo), "/dev/zero", "/dev/urandom"):
         kind = "FIFO" if special == str(fifo) else special
