@@ -62,7 +62,7 @@ def open_input(path: str | os.PathLike) -> BinaryIO:
 
 
 def _size(n: int) -> str:
-    return f"{n / 1e6:.1f} MB" if n >= 100_000 else f"{n / 1e3:.0f} kB"
+    return f"{n / 1e6:.1f} MB" if n >= 100_000 else f"{n / 1e3:.0f} kB" if n >= 1000 else f"{n} bytes"
 
 
 def _shown(path: str | os.PathLike, name: str | None) -> str:
@@ -93,13 +93,16 @@ def read_input(path: str | os.PathLike, *, what: str, limit: int, too_big: str, 
     try:
         with open_input(path) as f:
             size = os.fstat(f.fileno()).st_size
-            data = f.read(limit + 1) if size <= limit else b""
+            data = f.read(size + 1) if size <= limit else b""  # a buffer of the size, not of the bound
+            if size < len(data) <= limit:  # grown since (or a size the system does not know): on to the bound
+                data += f.read(limit + 1 - len(data))
     except OSError as exc:
         raise FacegenError(f"cannot read {what} {_shown(path, name)} ({exc.strerror or exc}): {fix}",
                            param=param) from exc
     if size > limit or len(data) > limit:
-        raise FacegenError(f"{what} {_shown(path, name)} is {_size(max(size, len(data)))}, more than facegen "
-                           f"reads ({_size(limit)}): {too_big}", param=param)
+        found = _size(size) if size > limit else f"at least {_size(len(data))}"  # grown while read
+        raise FacegenError(f"{what} {_shown(path, name)} is {found}, more than facegen reads "
+                           f"({_size(limit)}): {too_big}", param=param)
     return data
 
 
