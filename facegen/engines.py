@@ -251,10 +251,36 @@ def check_address(address: str, timeout: float = 5.0) -> None:
         raise FacegenError(f"the Ray address {address!r} is not host:port, e.g. 10.0.0.5:6379 or "
                            "ray://10.0.0.5:10001", param="ray_address")
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+        grpc = _answers_grpc(host.strip("[]"), int(port), timeout)
     except OSError as exc:
         raise FacegenError(f"cannot reach the Ray cluster at {address} ({exc.strerror or exc}): start it "
                            "with `ray start --head` or fix the address", param="ray_address") from exc
+    if not grpc:  # something listens there, but not Ray: ray.init would retry for minutes
+        raise FacegenError(f"{address} answers, but not as a Ray cluster (no gRPC server there): give the "
+                           "address `ray start --head` printed", param="ray_address")
+
+
+# an HTTP/2 client's opening (its preface and an empty SETTINGS frame): every gRPC server (Ray's GCS, the Ray
+# Client server) answers with a SETTINGS frame of its own at once; a silent port or an HTTP/1 server does not
+_HTTP2_OPENING = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+_SETTINGS = 4  # the HTTP/2 frame type
+
+
+def _answers_grpc(host: str, port: int, timeout: float) -> bool:
+    """Whether host:port speaks HTTP/2 as gRPC servers do (its first frame is SETTINGS), within `timeout`."""
+    with socket.create_connection((host, port), timeout=timeout) as conn:
+        conn.settimeout(timeout)
+        conn.sendall(_HTTP2_OPENING)
+        head = b""
+        try:
+            while len(head) < 9:
+                chunk = conn.recv(9 - len(head))
+                if not chunk:
+                    break
+                head += chunk
+        except TimeoutError:
+            return False
+    return len(head) == 9 and head[3] == _SETTINGS
 
 
 def _connect(ray, address: str | None, workers: int | None) -> bool:

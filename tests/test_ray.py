@@ -86,3 +86,35 @@ def test_unreachable_ray_address_is_one_line_exit_2(batch_inputs, tmp_path):
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.strip().count("\n") == 0 and "cannot reach the Ray cluster at 127.0.0.1" in proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("server", ["silent", "http"])
+def test_an_address_that_is_not_ray_is_one_line_exit_2(batch_inputs, tmp_path, server):
+    """Something listens there, but not Ray (a silent TCP server, an HTTP port): refused at once, where Ray's
+    own client would retry for minutes (no timing assert: the process timeout below catches a hang)."""
+    import http.server
+    import threading
+
+    manifest, model = batch_inputs
+    if server == "http":
+        httpd = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+        port = httpd.server_address[1]
+        threading.Thread(target=httpd.serve_forever, daemon=True).start()
+        listener = httpd.socket
+    else:
+        listener = socket.socket()
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(8)
+        port = listener.getsockname()[1]
+    try:
+        proc = subprocess.run([sys.executable, "-m", "facegen", "batch", str(manifest), "-o",
+                               str(tmp_path / "out"), "-m", str(model), "--engine", "ray", "--ray-address",
+                               f"127.0.0.1:{port}"], capture_output=True, text=True, timeout=60, cwd=REPO,
+                              check=False)
+    finally:
+        if server == "http":
+            httpd.shutdown()
+        listener.close()
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().count("\n") == 0 and "not as a Ray cluster" in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists()
