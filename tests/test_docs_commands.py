@@ -76,7 +76,10 @@ def command_lines(text: str) -> list[tuple[int, str, str | None]]:
             continue
         if fence is not None:
             kind = fence
-            line = stripped.removeprefix("$ ") if fence == "console" else stripped
+            if fence == "console":  # commands after the prompt; the other lines are their output
+                line = stripped[2:] if stripped.startswith("$ ") else ""
+            else:
+                line = stripped
         elif raw.startswith("    ") and (number == 1 or not lines[number - 2].strip() or
                                         lines[number - 2].startswith("    ")):
             kind, line = None, stripped
@@ -138,6 +141,11 @@ make demo
 facegen.animate("a.wav")
 ```
 
+```console
+$ facegen info
+facegen        0.1.0
+```
+
 ```yaml
 entrypoint: facegen batch lines.csv -o out
 ```
@@ -149,13 +157,16 @@ facegen/  errors.py
     facegen validate out/a.npy   # exits 1: a failed check
 """
     lines = command_lines(text)
-    assert [(n, k) for n, _, k in lines] == [(3, "sh"), (4, "sh"), (21, None)]
-    first, second, third = extract(text, "sample.md")
+    assert [(n, k) for n, _, k in lines] == [(3, "sh"), (4, "sh"), (14, "console"), (26, None)]
+    first, second, info, third = extract(text, "sample.md")
+    assert info.args == ("info",)
     assert first.args == ("animate", "a.wav", "--text", "one # two", "-o", "out/a.npy")
     assert first.needs is None and first.exit_code == 0
     assert second.args == ("train", "data", "-o", "m.safetensors", "--epochs", "1")
     assert second.needs == "BIWI data"
     assert third.args == ("validate", "out/a.npy") and third.exit_code == 1
+    (untagged,) = extract("```\nfacegen info\n```\n", "sample.md")
+    assert untagged.needs == UNTAGGED  # test_no_untagged_commands fails on it
 
 
 def test_no_untagged_commands():
