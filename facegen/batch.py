@@ -52,6 +52,8 @@ class Job:
     aligned: Aligned | None = None
     text_file: Path | None = None
     manifest: Path | None = None
+    fps: float | None = None  # the output frame rate (None: the model's)
+    options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
 
     @property
     def targets(self) -> tuple[Path, ...]:
@@ -346,7 +348,7 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                 if job.problem:
                     raise FacegenError(job.problem)
                 prepared[i] = animator.prepare(job.audio, text=job.text, alignment=job.alignment,
-                                               no_text=job.no_text, speaker=job.speaker,
+                                               no_text=job.no_text, speaker=job.speaker, fps=job.fps,
                                                reporter=SILENT.noting(note), aligned=job.aligned)
             except FacegenError as exc:
                 prepared[i] = exc
@@ -396,8 +398,9 @@ def run_batch(jobs: Sequence[Job], *, animator: Animator | None = None, batch_si
             try:
                 for target in job.targets:
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    result.files += [f for f in write_animation(anim, target, audio_source=job.audio)
-                                     if f not in result.files]
+                    options = {k: v for k, v in job.options.items() if k in format_of(target).options}
+                    written = write_animation(anim, target, audio_source=job.audio, **options)
+                    result.files += [f for f in written if f not in result.files]
                 if validate:
                     result.validation = [_validation(t, anim) for t in job.targets]
             except Exception as exc:  # noqa: BLE001 - an OS error (name too long, disk full...) is this row's only

@@ -59,15 +59,17 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  formats: str | Sequence[str] | None = None, force: bool = False, engine: str = "local",
                  ray_address: str | None = None, model: str | os.PathLike | None = None,
                  text_model: str | None = None, device: str = "auto", batch_size: int = 16,
-                 default_ext: str = ".usdc",
+                 default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
                  on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
 
     `jobs`: worker processes (local) or Ray actors (default: this machine's cores; Ray: the cluster's CPUs);
     `formats`: write each item in these formats from one inference (default: each row's output);
-    `force`: redo unchanged items too. `on_plan(total, to_run)` is called once the plan stands, `on_result`
-    with every item's result (skipped ones first). User errors (a malformed manifest, a refused plan, bad
+    `force`: redo unchanged items too; `fps`: every item's frame rate (None: the model's); `usd_mode`:
+    "points" or "blendshapes" for every USD target (None: the writer's default, points).
+    `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
+    ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
     """
     started = time.time()
@@ -77,11 +79,18 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         raise FacegenError(f"unknown engine {engine!r}: use {' or '.join(ENGINES)}", param="engine")
     if ray_address is not None and engine != "ray":
         raise FacegenError("a Ray address applies to the ray engine only", param=("ray_address", "engine"))
+    from facegen.animator import check_fps
+
+    check_fps(fps)
+    if usd_mode not in (None, "points", "blendshapes"):
+        raise FacegenError(f"unknown USD mode {usd_mode!r}: use points or blendshapes", param="usd_mode")
     exts = parse_formats(formats)
     format_of_extension(default_ext)
     out = Path(os.path.abspath(out_dir))
     all_jobs = read_manifest(manifest, outdir=out, default_ext=default_ext, formats=exts)
     for job in all_jobs:  # workers may run anywhere (Ray): absolute inputs
+        job.fps = fps
+        job.options = {"mode": usd_mode} if usd_mode else {}
         job.audio = Path(os.path.abspath(job.audio))
         job.alignment = Path(os.path.abspath(job.alignment)) if job.alignment is not None else None
     check_plan(all_jobs, out)
@@ -92,6 +101,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     out.mkdir(parents=True, exist_ok=True)
 
     options = {"model": _model_hash(model_path), "text_model": text_model}
+    if fps is not None or usd_mode is not None:  # (absent when unset: an earlier run's items stay unchanged)
+        options |= {"fps": fps, "usd_mode": usd_mode}
     state = RunState.load(out)
     results: dict[int, JobResult] = {}
     keys: dict[int, str] = {}

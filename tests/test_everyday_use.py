@@ -160,3 +160,26 @@ def test_animate_makes_the_output_folder_and_removes_it_when_nothing_is_written(
     failed = facegen("animate", tmp_path / "missing.wav", "--no-text", "-o", tmp_path / "a" / "b" / "out.npy")
     assert failed.returncode == 2 and len(failed.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "a").exists()  # the folders made for it are gone again
+
+
+# ---- batch: compact USD by default, other frame rates
+
+
+def test_batch_writes_compact_usd_by_default_and_takes_fps(tmp_path):
+    from pxr import Usd, UsdSkel
+
+    manifest = tmp_path / "lines.csv"
+    manifest.write_text(f"audio,text,output\n{WAV},\"{TEXT.strip()}\",line.usdc\n")
+    done = facegen("batch", manifest, "-o", tmp_path / "compact", "--jobs", "1", "-q")
+    assert done.returncode == 0, done.stderr
+    stage = Usd.Stage.Open(str(tmp_path / "compact" / "line.usdc"))
+    assert any(p.IsA(UsdSkel.Root) for p in stage.Traverse())  # UsdSkel blend shapes
+    compact = (tmp_path / "compact" / "line.usdc").stat().st_size
+    done = facegen("batch", manifest, "-o", tmp_path / "points", "--jobs", "1", "-q", "--usd-mode", "points",
+                   "--fps", "30")
+    assert done.returncode == 0, done.stderr
+    stage = Usd.Stage.Open(str(tmp_path / "points" / "line.usdc"))
+    seconds = sf.info(str(WAV)).duration
+    assert stage.GetTimeCodesPerSecond() == 30 and stage.GetEndTimeCode() == round(seconds * 30) - 1
+    assert not any(p.IsA(UsdSkel.Root) for p in stage.Traverse())
+    assert (tmp_path / "points" / "line.usdc").stat().st_size > 5 * compact

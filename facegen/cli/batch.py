@@ -7,7 +7,7 @@ import sys
 import click
 
 from facegen.cli.command import Command
-from facegen.cli.options import DEVICE
+from facegen.cli.options import DEVICE, FiniteRange
 
 
 @click.command(cls=Command)
@@ -31,12 +31,21 @@ from facegen.cli.options import DEVICE
 @click.option("--batch-size", type=click.IntRange(min=1), default=16, show_default=True,
               help="Clips of a worker run through the network at once.")
 @click.option("--ext", default=".usdc", show_default=True, help="Output format for rows without an output.")
+@click.option("--usd-mode", type=click.Choice(["points", "blendshapes"]), default="blendshapes",
+              show_default=True,
+              help="USD outputs: UsdSkel blend shapes (2.6 MB for a 4 s line) or time-sampled points "
+                   "(31 MB).")
+@click.option("--fps", type=FiniteRange(0, 240, min_open=True),
+              help="Frames per second of every output (default: the model's, 25).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model, text_model, device,
-          batch_size, ext, quiet):
+          batch_size, ext, usd_mode, fps, quiet):
     """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment,
     speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
-    are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed."""
+    are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed.
+
+    USD outputs are UsdSkel blend shapes unless --usd-mode points: a twelfth of the size for short lines, a
+    hundredth for long clips (benchmarks/bench_sizes.py); ARKit .json (0.04 MB a line) is the smallest."""
     from facegen.batch_run import run_manifest
     from facegen.runtime import Reporter
 
@@ -49,7 +58,8 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
     try:
         outcome = run_manifest(manifest, output_dir, jobs=jobs, formats=formats, force=force, engine=engine,
                                ray_address=ray_address, model=model, text_model=text_model, device=device,
-                               batch_size=batch_size, default_ext=ext, on_plan=planned,
+                               batch_size=batch_size, default_ext=ext, fps=fps, usd_mode=usd_mode,
+                               on_plan=planned,
                                on_result=lambda _r: bars and bars[0].update(1))
     finally:
         for bar in bars:
