@@ -183,3 +183,10 @@ def test_batch_writes_compact_usd_by_default_and_takes_fps(tmp_path):
     assert stage.GetTimeCodesPerSecond() == 30 and stage.GetEndTimeCode() == round(seconds * 30) - 1
     assert not any(p.IsA(UsdSkel.Root) for p in stage.Traverse())
     assert (tmp_path / "points" / "line.usdc").stat().st_size > 5 * compact
+
+
+def test_align_and_render_make_their_output_folders(tmp_path):
+    done = facegen("align", WAV, "--text-file", ROOT / "examples" / "excellent_room.txt", "-o",
+                   tmp_path / "new" / "words.json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "new" / "words.json").read_text())["words"][0]["word"] == "What"

@@ -44,6 +44,9 @@ def align(audio, text, text_file, output, phones):
         words, _ = clip_words(samples, sr, text=transcript, reporter=Reporter(note=say_stderr))
         found = None
     if output:
-        write_alignment(words, output, duration=len(samples) / sr, phones=found)
+        from facegen.atomic import output_folders
+
+        with output_folders(output):  # made as needed, as animate and batch do
+            write_alignment(words, output, duration=len(samples) / sr, phones=found)
     else:
         click.echo(json.dumps(alignment_json(words, found), indent=1))

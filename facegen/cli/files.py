@@ -43,8 +43,11 @@ def render(input_file, output, compare, model, template, fps, size, views, error
 
         mesh = read_template(model)
     reporter = Reporter.stderr(quiet)
-    result = run(input_file, output, size=size, views=views, compare=compare, template=mesh, fps=fps,
-                 error_scale=error_scale, reporter=reporter)
+    from facegen.atomic import output_folders
+
+    with output_folders(output):  # made as needed, removed again when nothing is written
+        result = run(input_file, output, size=size, views=views, compare=compare, template=mesh, fps=fps,
+                     error_scale=error_scale, reporter=reporter)
     for note in result.notes:
         click.echo(f"facegen: {note}", err=True)
     # as animate says it: "wrote PATH (...)", a progress line (silenced by --quiet)
