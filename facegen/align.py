@@ -1,8 +1,10 @@
 """Word timing with pocketsphinx: forced alignment of a transcript, and recognition without one.
 
 What the recogniser hears comes from `facegen.words.normalize_transcript` (lower case, numbers spelled
-out), and every result maps back to the user's words. Words missing from pocketsphinx's dictionary get a
-pronunciation from libespeak-ng (`facegen.espeak.pronounce`).
+out, stage directions left out), and every result maps back to the user's words. Words missing from
+pocketsphinx's dictionary get a pronunciation from libespeak-ng (`facegen.espeak.pronounce`); a word written
+in capitals may also be said letter by letter ("IAX", "SIP"): the search picks the one said.
+The first word's start and the last word's end come from the audio (`facegen.align_pieces.speech_edges`).
 
 Long audio is aligned piece by piece, cut at pauses (`facegen.align_pieces`): each pass costs time that
 grows with the length times the words in reach, and a piece that fails is retried alone with wide beams.
@@ -31,13 +33,14 @@ from facegen.align_pieces import (
     pieces,
     prefix_grammar,
     scored,
+    speech_edges,
     word_window,
 )
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import pronounce
 from facegen.phonetics import SIL, is_filler
-from facegen.words import Word, check_word_rate, normalize_transcript
+from facegen.words import Word, check_word_rate, no_words, normalize_transcript, spelled
 
 FRAME = 0.01  # pocketsphinx frame step (s)
 
@@ -121,27 +124,40 @@ def warm() -> None:
             _decoder(kind)
 
 
-def _dictionary_word(decoder, token: str) -> str:
-    """The decoder's dictionary entry for `token`.
+def _dictionary_word(decoder, token: str, letters: list[str] | None = None) -> str:
+    """The decoder's dictionary entry for `token`, said as a word or (`letters`: the dictionary's letter
+    words, `facegen.words.spelled`) letter by letter.
 
     A word missing from the dictionary gets espeak's pronunciation; a known word gets it as an
-    alternative when it differs, so a quirk of either (CMUdict's "hmm" = HH M) does not derail it.
+    alternative when it differs, so a quirk of either (CMUdict's "hmm" = HH M) does not derail it. With
+    `letters`, an entry of its own ("sip_spelled") holds these and the letters' pronunciation: the search
+    picks the one said ("SIP": S IH P or EH S AY P IY), and the plain word is left as it was.
     New words go in without rebuilding the searches: set_align_text builds a fresh one.
     """
     key = unicodedata.normalize("NFKD", token).encode("ascii", "ignore").decode()
     key = re.sub(r"[^a-z0-9']", "", key.lower()).strip("'") or "oov_" + "_".join(f"{ord(c):x}" for c in token)
+    spelling = [decoder.lookup_word(letter) for letter in letters or []]
+    name = f"{key}_spelled" if spelling and all(spelling) else key
     done = _PRONOUNCED.setdefault(id(decoder), set())
-    if key in done:
-        return key
-    known, n = [], 1
-    while (pron := decoder.lookup_word(key if n == 1 else f"{key}({n})")) is not None:
+    if name in done:
+        return name
+    known = _pronunciations(decoder, key)
+    wanted = [*known, " ".join(pronounce(token) or ["AH"])] + ([" ".join(spelling)] if name != key else [])
+    have = known if name == key else []
+    for phones in dict.fromkeys(wanted):
+        if phones not in have:
+            have.append(phones)
+            decoder.add_word(name if len(have) == 1 else f"{name}({len(have)})", phones, False)
+    done.add(name)
+    return name
+
+
+def _pronunciations(decoder, key: str) -> list[str]:
+    """The dictionary's pronunciations of `key`: its entry and the alternatives "key(2)", "key(3)", ..."""
+    known: list[str] = []
+    while (pron := decoder.lookup_word(key if not known else f"{key}({len(known) + 1})")) is not None:
         known.append(pron)
-        n += 1
-    phones = " ".join(pronounce(token) or ["AH"])
-    if phones not in known:
-        decoder.add_word(key if n == 1 else f"{key}({n})", phones, False)
-    done.add(key)
-    return key
+    return known
 
 
 def _pcm16k(audio: np.ndarray, sample_rate: int) -> np.ndarray:
@@ -303,18 +319,20 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
            with_phones: bool) -> tuple[list[Word], list[Phone]]:
     entries = normalize_transcript(transcript)
     if not entries:
-        raise FacegenError("the transcript is empty: pass the words spoken in the audio", param="text")
-    check_word_rate(len(entries), len(audio) / sample_rate, "the transcript")
+        raise no_words(transcript)
+    # (its word's index, token, its letters when it may be said letter by letter)
+    spoken = [(i, token, spelled(word, token)) for i, (word, tokens) in enumerate(entries)
+              for token in tokens]
+    check_word_rate(len(spoken), len(audio) / sample_rate, "the transcript")  # "1234": four words said
     audio = _pcm16k(audio, sample_rate)
     pcm = _pcm_bytes(audio)
-    spoken = [(i, token) for i, (_, tokens) in enumerate(entries) for token in tokens]
     duration = len(audio) / RATE
     n_frames = len(audio) // HOP
     loud = loud_frames(audio, n_frames)
     spans = pieces(loud)
     chosen = scored(spans)
     words: list[tuple[str, int, int]] = []
-    phones: list[Phone] = []
+    phones: list[list[Phone]] = []  # per word, with_phones
     gaps, free = np.full(n_frames, np.nan), np.full(n_frames, np.nan)
     with _LOCK:
         cmn = _clip_cmn(pcm)
@@ -327,7 +345,7 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
             back = 1 if words else 0
             origin = max(0, words[-1][1] - LOOKBEHIND) if words else 0  # the first frame of its search
             part = pcm[origin * HOP * 2:stop * HOP * 2]
-            found = _align_piece(part, [t for _, t in spoken[len(words) - back:]], stop - origin,
+            found = _align_piece(part, [(t, s) for _, t, s in spoken[len(words) - back:]], stop - origin,
                                  n_frames - origin, cmn, prefix=not last)
             if found is None or len(found[1]) <= back:
                 if last:
@@ -354,17 +372,48 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
             start, p = end, p + 1
     if len(words) < len(spoken):
         raise _mismatch("no alignment of its words to the audio exists")
+    # the outer edges from the audio (align_pieces.speech_edges); a word whose edge moves is scored over its
+    # new bounds as the search placed them (the frames it gave to silence fit worse), and its phones come from
+    # aligning it again inside them
+    first, last = words[0][1], words[-1][2]
+    start, end = speech_edges(loud, first, last)
+    words[0] = (words[0][0], start, words[0][2])
+    words[-1] = (words[-1][0], words[-1][1], end)
+    moved = {k for k, edge in ((0, start != first), (len(words) - 1, end != last)) if edge and with_phones}
+    for k in moved:
+        with _LOCK:
+            alignment = _word_alone(pcm, spoken[k][1:], words[k][1], words[k][2] + 1, cmn)
+            if alignment is not None:
+                phones[k] = _phones(alignment, 0, 1, words[k][1], duration)[0]
     _check_match(loud, words, gaps, free)
     times: dict[int, list[float]] = {}
-    for (index, _), (_, first, last) in zip(spoken, words, strict=True):
+    for (index, _, _), (_, first, last) in zip(spoken, words, strict=True):
         start, end = first * FRAME, min((last + 1) * FRAME, duration)
         times.setdefault(index, [start, end])[1] = end
-    return [Word(entries[i][0], round(t[0], 3), round(t[1], 3)) for i, t in sorted(times.items())], phones
+    return ([Word(entries[i][0], round(t[0], 3), round(t[1], 3)) for i, t in sorted(times.items())],
+            [phone for word in phones for phone in word])
 
 
-def _align_piece(pcm: bytes, tokens: list[str], length: int, rest: int, cmn: str,
+def _word_alone(pcm: bytes, token: tuple[str, list[str] | None], first: int, end: int, cmn: str):
+    """The state alignment of the clip's first or last word (`token` and its letters) over its frames `first`
+    to `end` (excluded), whose outer edge came from the audio (align_pieces.speech_edges): aligned again over
+    just those frames, without silence, so that its sounds share them as said (the /s/ of "six" its 150 ms,
+    not one frame); None if pocketsphinx finds none."""
+    decoder = _decoder("align-nofiller")
+    decoder.set_align_text(_dictionary_word(decoder, *token))
+    part = pcm[first * HOP * 2:end * HOP * 2]
+    if not _decode(decoder, part, cmn):
+        return None
+    try:
+        return _state_pass(decoder, part, cmn)
+    except (FacegenError, RuntimeError):
+        return None
+
+
+def _align_piece(pcm: bytes, tokens: list[tuple[str, list[str] | None]], length: int, rest: int, cmn: str,
                  prefix: bool) -> tuple[object, list[tuple[str, int, int]]] | None:
-    """Align one piece: all of `tokens`, or (`prefix`) as many of the first of them as its speech holds.
+    """Align one piece: all of `tokens` (each with its letters, if it may be spelled), or (`prefix`) as many
+    of the first of them as its speech holds.
 
     Tries the decoders of _CONFIGS in turn (wide beams only when the first fails; a prefix never without
     fillers, it would have nothing else for a pause); returns the decoder that aligned it (its search still
@@ -375,7 +424,7 @@ def _align_piece(pcm: bytes, tokens: list[str], length: int, rest: int, cmn: str
     for kind in ("align", "align-wide") if prefix else ("align", "align-wide", "align-nofiller"):
         decoder = _decoder(kind)
         for offered in offers:
-            keys = [_dictionary_word(decoder, token) for token in tokens[:offered]]
+            keys = [_dictionary_word(decoder, token, letters) for token, letters in tokens[:offered]]
             if prefix:
                 decoder.add_fsg("_prefix", prefix_grammar(decoder, "_prefix", keys))
                 decoder.activate_search("_prefix")
@@ -410,11 +459,11 @@ def _piece_states(decoder, pcm: bytes, kept: list[tuple[str, int, int]], length:
     return _state_pass(decoder, pcm, cmn)
 
 
-def _phones(alignment, skip: int, count: int, first: int, duration: float) -> list[Phone]:
+def _phones(alignment, skip: int, count: int, first: int, duration: float) -> list[list[Phone]]:
     """The phones of `count` words of a piece's state alignment after its first `skip` words (`first`: the
     frame the piece's search started at). Read while iterating: an entry of pocketsphinx's alignment is only
     valid while its iterator is."""
-    phones: list[Phone] = []
+    phones: list[list[Phone]] = []
     for word in alignment:
         if count == 0:
             break
@@ -424,9 +473,9 @@ def _phones(alignment, skip: int, count: int, first: int, duration: float) -> li
             skip -= 1
             continue
         count -= 1
-        phones += [(phone.name, round((first + phone.start) * FRAME, 3),
-                    round(min((first + phone.start + phone.duration) * FRAME, duration), 3))
-                   for phone in word if phone.name != SIL]
+        phones.append([(phone.name, round((first + phone.start) * FRAME, 3),
+                        round(min((first + phone.start + phone.duration) * FRAME, duration), 3))
+                       for phone in word if phone.name != SIL])
     return phones
 
 

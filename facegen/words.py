@@ -1,8 +1,10 @@
 """Words and their times: `Word`, transcript normalisation (what a recogniser hears: lower case,
-numbers spelled out with num2words) and the word rate speech can have. The alignment files (word timings on
-disk) are facegen.alignment_files'.
+numbers spelled out with num2words, stage directions left out) and the word rate speech can have. The
+alignment files (word timings on disk) are facegen.alignment_files'.
 
 Words keep the user's spelling (`Word.text`); `normalize_transcript` gives the spoken tokens of each.
+Scripts carry what is not said: stage directions, notes and sound descriptions in brackets ("(laughs)",
+"[tone]", "<beep>", "*sighs*"); `split_directions` sets them apart, and they never reach the aligner.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import re
 import unicodedata
 from dataclasses import dataclass
+from fractions import Fraction
 
 from facegen.errors import FacegenError
 
@@ -50,7 +53,8 @@ _CURRENCIES = {"$": ("dollar", "dollars", "cent", "cents"), "€": ("euro", "eur
                "£": ("pound", "pounds", "penny", "pence"), "¥": ("yen", "yen", "sen", "sen")}
 _SYMBOLS = {"&": "and", "+": "plus", "@": "at", "%": "percent", "#": "number", "=": "equals"}
 _MULTIPLIERS = {"k": "thousand", "m": "million", "bn": "billion", "b": "billion"}
-_SPELLED_OUT = 10**15  # from here on, numbers are said digit by digit
+_SPELLED_OUT = 16  # numbers of this many digits or more (10**15 on) are said digit by digit
+_DIGITS = ("zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
 
 
 def _said(n: int, to: str = "cardinal") -> list[str]:
@@ -61,28 +65,31 @@ def _said(n: int, to: str = "cardinal") -> list[str]:
 
 
 def _digits(digits: str) -> list[str]:
-    return [word for d in digits for word in _said(int(d))]
+    return [_DIGITS[int(d)] for d in digits]
 
 
-def cardinal(n: int) -> list[str]:
-    """English words for a non-negative integer: 342 → three hundred forty two."""
-    return _digits(str(n)) if n >= _SPELLED_OUT else _said(n)
+def cardinal(digits: str) -> list[str]:
+    """English words for a non-negative integer written in decimal digits: "342" → three hundred forty two;
+    one of _SPELLED_OUT digits or more digit by digit (never converted to an int: Python refuses to convert
+    more than 4,300 digits)."""
+    digits = digits.lstrip("0") or "0"
+    return _digits(digits) if len(digits) >= _SPELLED_OUT else _said(int(digits))
 
 
-def ordinal(n: int) -> list[str]:
-    """English ordinal words: 3 → third, 21 → twenty first."""
-    if n >= _SPELLED_OUT:
-        return _digits(str(n)[:-1]) + _said(n % 10, "ordinal")
-    return _said(n, "ordinal")
+def ordinal(digits: str) -> list[str]:
+    """English ordinal words for decimal digits: "3" → third, "21" → twenty first."""
+    digits = digits.lstrip("0") or "0"
+    if len(digits) >= _SPELLED_OUT:
+        return _digits(digits[:-1]) + _said(int(digits[-1]), "ordinal")
+    return _said(int(digits), "ordinal")
 
 
 def _integer(digits: str) -> list[str]:
     if len(digits) > 1 and digits.startswith("0"):
         return _digits(digits)  # 007 → zero zero seven
-    n = int(digits)
-    if len(digits) == 4 and (1100 <= n <= 1999 or 2010 <= n <= 2099):
-        return _said(n, "year")  # 1990 → nineteen ninety, 1905 → nineteen oh five, 1900 → nineteen hundred
-    return cardinal(n)
+    if len(digits) == 4 and (1100 <= int(digits) <= 1999 or 2010 <= int(digits) <= 2099):
+        return _said(int(digits), "year")  # 1990 → nineteen ninety, 1905 → nineteen oh five
+    return cardinal(digits)
 
 
 def _number(text: str) -> list[str]:
@@ -100,6 +107,22 @@ def _plural(words: list[str]) -> list[str]:
     return words[:-1] + [last]
 
 
+def _numeral(ch: str) -> str | None:
+    """A number sign that is not a decimal digit ("①", "²", "Ⅻ", "½") as words to say, or None."""
+    if unicodedata.category(ch) not in ("No", "Nl"):
+        return None
+    value = unicodedata.numeric(ch, None)
+    if value is None:
+        return None
+    if value == int(value):
+        return " ".join(cardinal(str(int(value))))
+    fraction = Fraction(value).limit_denominator(1000)
+    denominator = {2: ["half", "halves"], 4: ["quarter", "quarters"]}.get(fraction.denominator)
+    one = denominator[0] if denominator else ordinal(str(fraction.denominator))[-1]
+    many = denominator[1] if denominator else _plural([one])[0]
+    return " ".join(cardinal(str(fraction.numerator)) + [one if fraction.numerator == 1 else many])
+
+
 _NUM = r"\d{1,3}(?:,\d{3})+(?:\.\d+)?|\d+(?:\.\d+)?|\.\d+"
 _RE_CURRENCY = re.compile(rf"([$€£¥])({_NUM})(k|m|bn|b)?", re.IGNORECASE)
 _RE_PERCENT = re.compile(rf"({_NUM})%")
@@ -112,22 +135,25 @@ _RE_PIECE = re.compile(r"\d+|[^\W\d_]+(?:'[^\W\d_]+)*", re.UNICODE)
 def _spoken(token: str) -> list[str]:
     """The spoken words for one written word (already edge-stripped)."""
     token = token.replace("’", "'").replace("‘", "'")
+    if any(_numeral(ch) for ch in token):  # "①" → one, "1½" → one one half, "m²" → m two
+        token = "".join(f" {said} " if (said := _numeral(ch)) else ch for ch in token)
+        return [word for part in token.split() for word in _spoken(strip_edges(part))]
     if m := _RE_CURRENCY.fullmatch(token):
         symbol, amount, mult = m.groups()
         one, many, sub_one, sub_many = _CURRENCIES[symbol]
         if mult:
             return _number(amount) + [_MULTIPLIERS[mult.lower()], many]
         whole, _, frac = amount.replace(",", "").partition(".")
-        words = cardinal(int(whole or 0)) + [one if whole == "1" else many]
+        words = cardinal(whole or "0") + [one if whole == "1" else many]
         if frac and len(frac) == 2 and int(frac):
-            words += ["and"] + cardinal(int(frac)) + [sub_one if frac == "01" else sub_many]
+            words += ["and"] + cardinal(frac) + [sub_one if frac == "01" else sub_many]
         elif frac:
             words = _number(amount) + [many]
         return words
     if m := _RE_PERCENT.fullmatch(token):
         return _number(m.group(1)) + ["percent"]
     if m := _RE_ORDINAL.fullmatch(token):
-        return ordinal(int(m.group(1)))
+        return ordinal(m.group(1))
     if m := _RE_DECADE.fullmatch(token):
         return _plural(_integer(m.group(1)))
     if _RE_NUMBER.fullmatch(token):
@@ -139,18 +165,100 @@ def _spoken(token: str) -> list[str]:
             continue
         for m in _RE_PIECE.finditer(piece):
             part = m.group()
-            words += _integer(part) if part.isdigit() else [part.lower()]
+            words += _integer(part) if part[0].isdecimal() else [part.lower()]
     return words
+
+
+# --------------------------------------------------------------------------------------------------
+# stage directions
+
+_CLOSING = {"(": ")", "[": "]", "{": "}", "<": ">"}
+
+
+def _direction_end(text: str, i: int) -> int | None:
+    """Where the stage direction opening at text[i] ends (the index after it), or None if none opens there.
+
+    Brackets nest ("[tone (long)]" is one); "<" and "*" only with no space just inside ("<beep>", "*sighs*";
+    "a < b" and "3 * 4" are not directions). An unclosed bracket is no direction.
+    """
+    opening = text[i]
+    if opening == "*":
+        if i + 1 >= len(text) or text[i + 1].isspace() or (i and text[i - 1].isalnum()):
+            return None
+        close = text.find("*", i + 1)
+        return close + 1 if close > 0 and not text[close - 1].isspace() else None
+    closing = _CLOSING.get(opening)
+    if closing is None or (opening == "<" and text[i + 1:i + 2].isspace()):
+        return None
+    depth = 0
+    for j in range(i, len(text)):
+        depth += (text[j] == opening) - (text[j] == closing)
+        if depth == 0:
+            return None if opening == "<" and text[j - 1].isspace() else j + 1
+    return None
+
+
+def split_directions(text: str) -> tuple[str, list[str]]:
+    """`text` without its stage directions, and the directions as written (whitespace collapsed).
+
+    A stage direction, note or sound description is a span in brackets ("(laughs)", "[tone]", "<beep>",
+    "{music}", "(note: does not say "2")") or between asterisks ("*sighs*"); a parenthesis that holds no
+    letter ("(50%)", "(2)") is read aloud. Each direction leaves a space behind: "yes(laughs)no" is two words.
+    """
+    spoken: list[str] = []
+    directions: list[str] = []
+    i = 0
+    while i < len(text):
+        end = _direction_end(text, i) if text[i] in "([{<*" else None
+        if end is None:
+            spoken.append(text[i])
+            i += 1
+            continue
+        span = text[i:end]
+        if span[0] == "(" and not any(ch.isalpha() for ch in span):
+            spoken.append(span)
+        else:
+            directions.append(" ".join(span.split()))
+            spoken.append(" ")
+        i = end
+    return "".join(spoken), directions
+
+
+def no_words(text: str) -> FacegenError:
+    """The error for a transcript with no word to say: empty, or only stage directions (its own message)."""
+    directions = split_directions(text)[1]
+    if not directions:
+        return FacegenError("the transcript is empty: pass the words spoken in the audio", param="text")
+    shown = " ".join(directions)
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    return FacegenError(f"the transcript holds only a stage direction, {shown}, and no spoken word: pass the "
+                        "words spoken in the audio (what is in brackets is not said)", param="text")
+
+
+# --------------------------------------------------------------------------------------------------
+# acronyms
+
+MAX_SPELLED = 6  # an all-caps token of at most this many letters may be said letter by letter ("IAX")
+
+
+def spelled(word: str, token: str) -> list[str] | None:
+    """The letters of `token` as the dictionary's letter words ("iax" → ["i.", "a.", "x."]) when `word`, as
+    written, has it in capitals ("IAX", "SIP-based", "R&D"), so it may be said letter by letter; else None.
+    The aligner offers them beside the word itself and picks what was said."""
+    if not (token.isascii() and token.isalpha() and len(token) <= MAX_SPELLED and token.upper() in word):
+        return None
+    return [f"{letter}." for letter in token]
 
 
 def normalize_transcript(text: str) -> list[tuple[str, list[str]]]:
     """For each whitespace-separated word of `text`: (the word, edge punctuation stripped; its spoken tokens).
 
     Spoken tokens are lower case without punctuation, numbers spelled out ("42" → ["forty", "two"],
-    "3rd" → ["third"], "$5" → ["five", "dollars"]). Words made only of punctuation are left out.
+    "3rd" → ["third"], "$5" → ["five", "dollars"], a 5,000-digit number digit by digit, "①" → ["one"]).
+    Words made only of punctuation are left out, and so are stage directions (`split_directions`).
     """
     out = []
-    for raw in text.split():
+    for raw in split_directions(text)[0].split():
         word = strip_edges(raw)
         if not word:
             continue
