@@ -68,6 +68,10 @@ def mel_filters(cfg: FeatureConfig) -> np.ndarray:
                fmax=cfg.fmax).astype(np.float32)
 
 
+MIN_SAMPLE_RATE, MAX_SAMPLE_RATE = 4000, 384000  # Hz: telephone speech to studio masters
+MAX_SECONDS = 4 * 3600  # the longest audio facegen reads (an audiobook chapter, a long podcast)
+
+
 def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tuple[np.ndarray, int]:
     """Read audio of any common format, rate, channel count and sample format: a file path, or the bytes of
     an encoded file (a WAV inside a USDZ package, the MP3 inside a GLB). The one place audio is read.
@@ -89,7 +93,17 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
         if not path.is_file():
             raise FacegenError(f"{path} is not a file: pass an audio file (.wav, .flac, .ogg, .mp3)")
     try:
-        data, sr = sf.read(handle, dtype="float32", always_2d=True)
+        with sf.SoundFile(handle) as f:
+            sr = int(f.samplerate)
+            if not MIN_SAMPLE_RATE <= sr <= MAX_SAMPLE_RATE:
+                raise FacegenError(f"{name} says its sample rate is {sr} Hz; speech audio has "
+                                   f"{MIN_SAMPLE_RATE}-{MAX_SAMPLE_RATE} Hz: re-export it")
+            if f.frames > MAX_SECONDS * sr:  # as the header says: a lying one is read in bounded blocks below
+                raise FacegenError(f"{name} is {f.frames / sr / 3600:.1f} hours long; facegen animates up to "
+                                   f"{MAX_SECONDS // 3600} hours: cut it into parts")
+            # block by block, the channels averaged as they come: a long stereo file never exists as floats
+            blocks = [b.mean(axis=1) if b.shape[1] > 1 else b[:, 0]
+                      for b in f.blocks(blocksize=1 << 20, dtype="float32", always_2d=True)]
     except sf.LibsndfileError as exc:
         raise FacegenError(
             f"cannot read {name} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): "
@@ -97,7 +111,7 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
         ) from exc
     except (OSError, RuntimeError, TypeError) as exc:
         raise FacegenError(f"cannot read {name} as audio ({exc}): {fix}") from exc
-    samples = data.mean(axis=1) if data.shape[1] > 1 else data[:, 0]
+    samples = np.concatenate(blocks) if blocks else np.zeros(0, np.float32)
     samples = np.ascontiguousarray(samples, dtype=np.float32)
     if not np.isfinite(samples).all():
         raise FacegenError(f"audio {name} contains NaN or infinite samples: re-export it")

@@ -190,3 +190,15 @@ def test_align_and_render_make_their_output_folders(tmp_path):
                    tmp_path / "new" / "words.json")
     assert done.returncode == 0, done.stderr
     assert json.loads((tmp_path / "new" / "words.json").read_text())["words"][0]["word"] == "What"
+
+
+def test_audio_whose_header_lies_is_refused_before_it_is_read(tmp_path):
+    from facegen.audio import load_audio
+
+    sf.write(tmp_path / "one_hz.wav", np.zeros(47000, np.float32) + 0.1, 1, subtype="PCM_16")  # "13 hours"
+    with pytest.raises(FacegenError, match="sample rate is 1 Hz"):
+        load_audio(tmp_path / "one_hz.wav")
+    stereo = np.stack([np.linspace(-0.5, 0.5, 48000), np.full(48000, 0.25)], axis=1).astype(np.float32)
+    sf.write(tmp_path / "stereo.wav", stereo, 48000, subtype="FLOAT")
+    mono, rate = load_audio(tmp_path / "stereo.wav")  # read block by block, the channels averaged
+    assert rate == 48000 and mono.dtype == np.float32 and np.allclose(mono, stereo.mean(axis=1), atol=1e-7)
