@@ -18,6 +18,7 @@ from facegen.runtime import SILENT, Reporter
 
 FORCED, FILE, RECOGNISED, NONE = ("forced alignment", "alignment file", "speech recognition",
                                   "none (--no-text)")
+FILE_PHONES_ALIGNED = "alignment file + phones aligned"  # a file's words, (some of) their phones aligned here
 
 
 def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
@@ -68,19 +69,14 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
                           alignment, no_text: bool, reporter: Reporter,
                           ahead: AlignAhead | Aligned | None = None) -> tuple[list, str, np.ndarray]:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
-    transcript, the phones of an alignment file (facegen align --phones), or without a transcript (also with
-    --no-text, which only drops the text features) the phone alignment of the recognised words."""
-    from facegen.alignment_files import read_alignment, read_phones
+    transcript; the words of an alignment file with its phones, or, where it has none, the phones aligned
+    inside its word times (`alignment_phones`); or without a transcript (also with --no-text, which only drops
+    the text features) the phone alignment of the recognised words."""
     from facegen.phonetics import phone_frames, silence
 
     if alignment is not None:
-        words = read_alignment(alignment, duration=len(samples) / sr)
-        phones = read_phones(alignment)
-        if phones is None:
-            raise FacegenError(f"this model needs phone timings but {alignment} has none: write it with "
-                               "`facegen align --phones`, or pass the transcript",
-                               param=("alignment", "text"))
-        return words, FILE, phone_frames(phones, num_frames, fps)
+        words, phones, source = alignment_phones(samples, sr, alignment, reporter)
+        return words, source, phone_frames(phones, num_frames, fps)
     if text is not None and not no_text:
         _check_transcript(text)
         words, phones = forced(samples, sr, text, ahead, with_phones=True)
@@ -101,3 +97,25 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
                       "a transcript; give the transcript or an alignment file for better lips and brows)")
         return words, RECOGNISED, found
     return [], NONE, found
+
+
+def alignment_phones(samples: np.ndarray, sr: int, alignment: str | os.PathLike,
+                     reporter: Reporter = SILENT) -> tuple[list, list, str]:
+    """The words of an alignment file, their phones and where those came from: the file's own (Gentle, an MFA
+    TextGrid, `facegen align --phones`), else pocketsphinx's phone alignment inside the file's word times
+    (facegen.phone_timing), with espeak-ng's pronunciations spread over the words that do not align (a note
+    counts them)."""
+    from facegen.alignment_files import read_alignment, read_phones
+    from facegen.phone_timing import phones_in_word_times
+
+    duration = len(samples) / sr
+    words = read_alignment(alignment, duration=duration)
+    known = read_phones(alignment, duration=duration, reporter=reporter)
+    if not known:
+        reporter.progress(f"aligning the phones inside the word times of {alignment} (pocketsphinx)")
+    found = phones_in_word_times(samples, sr, words, known)
+    if found.spread:
+        reporter.note(f"{found.spread} of {len(words)} words of {alignment} could not be aligned inside "
+                      "their times: their phones are spread over them from their pronunciation (check those "
+                      "times)")
+    return words, found.phones, FILE_PHONES_ALIGNED if found.aligned or found.spread else FILE

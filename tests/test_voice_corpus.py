@@ -133,12 +133,13 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
     wav, text = out / "wav" / f"{name}.wav", (out / "text" / f"{name}.txt").read_text().strip()
     anim = animate(wav, text=text, bundle=bundle, speaker=0)
     assert anim.metadata["word_timing"] == "forced alignment" and np.isfinite(anim.vertices).all()
-    # the same words without phones in the file: refused with the way out
+    # the same words without phones in the file: the phones aligned inside their times
     words = [Word(w["word"], w["start"], w["end"])
              for w in json.loads((out / "alignments" / f"{name}.json").read_text())["words"]]
     write_alignment(words, tmp_path / "words.json")
-    with pytest.raises(FacegenError, match="align --phones"):
-        animate(wav, alignment=tmp_path / "words.json", bundle=bundle, speaker=0)
+    from_words = animate(wav, alignment=tmp_path / "words.json", bundle=bundle, speaker=0)
+    assert from_words.metadata["word_timing"] == "alignment file + phones aligned"
+    assert from_words.vertices.shape == anim.vertices.shape and np.isfinite(from_words.vertices).all()
     audio_only = animate(wav, no_text=True, bundle=bundle, speaker=0)  # phones of the recognised words
     assert audio_only.metadata["word_timing"] == "none (--no-text)"
     assert audio_only.vertices.shape == anim.vertices.shape and np.isfinite(audio_only.vertices).all()
