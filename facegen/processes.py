@@ -21,70 +21,84 @@ from facegen.errors import FacegenError
 def start_process(target: Callable, args: tuple = (), *, start: str = "fork", name: str | None = None):
     """A started daemon multiprocessing.Process running target(*args) (the forked alignment started ahead),
     or None where `start` is not available; its pipe: multiprocessing.Pipe. It ends when this process ends,
-    even by SIGKILL (`die_with`)."""
+    even by SIGKILL (`end_with`)."""
     import multiprocessing
 
     if start not in multiprocessing.get_all_start_methods():
         return None
-    process = multiprocessing.get_context(start).Process(target=_owned, args=(os.getpid(), target, args),
+    process = multiprocessing.get_context(start).Process(target=_owned, args=(lifeline(), target, args),
                                                          daemon=True, name=name)
     process.start()
     return process
 
 
-def _owned(owner: int, target: Callable, args: tuple) -> None:
-    die_with(owner)
+def _owned(line, target: Callable, args: tuple) -> None:
+    reader, writer = line
+    writer.close()  # a forked child's copy: only its parent may hold the write end
+    end_with(reader)
     target(*args)
 
 
-def die_with(owner: int, grace: float = 1.0, server: int | None = None) -> None:
-    """End this process when the process `owner` ends, however it ends (SIGKILL too): SIGTERM (its handler
-    unwinds the atomic writes), then SIGKILL `grace` s later; `server`, this process's parent forkserver, is
-    SIGKILLed at once (it holds nothing, and its teardown of torch and USD would take a second). Without this,
-    a pool's workers outlive a killed parent, waiting for work for ever (each holds both ends of its task
-    queue), and a forkserver lives as long as its workers. A daemon thread watches: on a pidfd, readable when
-    `owner` exits (Linux >= 5.3), else by looking twice a second (whether this process's parent is still
-    `owner`, or `owner` still exists)."""
+_lifelines: dict[int, tuple] = {}  # process id -> its lifeline (reader, writer)
+_held = []  # the lifeline this process ends with, open as long as it runs
+
+
+def lifeline() -> tuple:
+    """This process's lifeline, (reader, writer) of a pipe (multiprocessing.Pipe) whose write end only this
+    process holds, open as long as it runs: a process given the reader ends with this one (`end_with`)."""
+    import multiprocessing
+
+    if os.getpid() not in _lifelines:
+        _lifelines[os.getpid()] = multiprocessing.Pipe(duplex=False)
+    return _lifelines[os.getpid()]
+
+
+def end_with(reader) -> None:
+    """End this process when the write end of the lifeline `reader` closes, i.e. when the process that made
+    it ends, however it ends (SIGKILL too). Without this, a pool's workers outlive a killed parent, waiting
+    for work for ever (each holds both ends of its task queue), and a forkserver lives as long as its workers.
+
+    On Linux the kernel sends this process SIGKILL at that moment: the pipe, opened again through /proc (a
+    passed fd shares its signal owner with every other process given it), is O_ASYNC with SIGKILL as its
+    signal; it needs no thread, no lock, no time slice of its own. Its writes in progress leave their marked
+    temporaries, which the next write into that folder removes (atomic.remove_stale_temporaries). Elsewhere a
+    daemon thread waits for the pipe's end and sends SIGTERM (the handler unwinds the atomic writes), then
+    SIGKILL."""
+    import signal
+
+    _held.append(reader)
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        fcntl = None
+    own = f"/proc/self/fd/{reader.fileno()}"
+    if fcntl is not None and hasattr(fcntl, "F_SETSIG") and os.path.exists(own):
+        import select
+
+        fd = os.open(own, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+        _held.append(fd)
+        fcntl.fcntl(fd, fcntl.F_SETOWN, os.getpid())
+        fcntl.fcntl(fd, fcntl.F_SETSIG, signal.SIGKILL)
+        fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) | os.O_ASYNC)
+        if select.select([fd], [], [], 0)[0]:  # nothing is ever written: readable is closed, before the above
+            os.kill(os.getpid(), signal.SIGKILL)
+        return
     import threading
 
-    try:
-        handle = os.pidfd_open(owner)
-    except ProcessLookupError:
-        handle = -1  # gone already
-    except (AttributeError, OSError):  # no pidfd here (macOS, Windows, an old kernel, a sandbox)
-        handle = None
-        if owner != os.getppid() and os.name == "nt":
-            return  # no safe way to ask whether it exists (os.kill(pid, 0) would end it)
-    threading.Thread(target=_watch, args=(owner, handle, grace, server), daemon=True,
-                     name="facegen-die-with").start()
+    threading.Thread(target=_await_end, args=(reader,), daemon=True, name="facegen-end-with").start()
 
 
-def _watch(owner: int, handle: int | None, grace: float, server: int | None) -> None:
-    import select
+def _await_end(reader, grace: float = 2.0) -> None:
     import signal
     import time
 
-    if handle is not None and handle >= 0:
-        select.select([handle], [], [])
-    elif handle is None:
-        parent = owner == os.getppid()
-        while os.getppid() == owner if parent else _exists(owner):
-            time.sleep(0.5)
-    if server is not None and os.getppid() == server:  # still our parent: not another process by now
-        os.kill(server, getattr(signal, "SIGKILL", signal.SIGTERM))
+    try:
+        reader.recv_bytes()
+    except (EOFError, OSError):
+        pass
     os.kill(os.getpid(), signal.SIGTERM)
     time.sleep(grace)
     os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
-
-
-def _exists(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass
-    return True
 
 
 class ProcessPool:
@@ -103,14 +117,14 @@ class ProcessPool:
         if start == "forkserver" and not sys.platform.startswith("linux"):
             start = "spawn"  # macOS, Windows: spawn, as their Python does by default
         context = multiprocessing.get_context(start)
-        if start == "forkserver":
-            context.set_forkserver_preload(list(preload))
+        if start == "forkserver":  # the server exits at once when its last worker has (forkserver_exit)
+            context.set_forkserver_preload([*preload, "facegen.forkserver_exit"])
         self.start = start
         self._context = _Recording(context)
         self._server = context.RawValue("i", 0) if start == "forkserver" else None
         self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=self._context,
                                             initializer=_start_worker,
-                                            initargs=(self._server, os.getpid(), initializer, initargs),
+                                            initargs=(self._server, lifeline()[0], initializer, initargs),
                                             max_tasks_per_child=max_tasks_per_child)
 
     def submit(self, fn: Callable, /, *args, **kwargs):
@@ -147,7 +161,7 @@ def process_pool(workers: int, *, start: str = "spawn", initializer: Callable | 
     first. start="forkserver" (Linux; spawn elsewhere): forked from a server that imported `preload` once
     (torch, USD, the aligner's decoders); "spawn": fresh interpreters (`max_tasks_per_child=1`: a fresh
     one per task, for state no library resets, such as libespeak-ng's). The workers end when this process
-    ends, even by SIGKILL (`die_with`); a forkserver ends with its last worker."""
+    ends, even by SIGKILL (`end_with`); a forkserver ends with its last worker."""
     if start not in ("forkserver", "spawn"):
         raise ValueError(f"unknown start method {start!r} for a process pool: forkserver or spawn")
     return ProcessPool(workers, start, initializer, initargs, preload, max_tasks_per_child)
@@ -168,10 +182,10 @@ class _Recording:
         return process
 
 
-def _start_worker(server, owner: int, initializer: Callable | None, initargs: tuple) -> None:
-    """In a new pool worker: die with the pool's `owner` (die_with), note the forkserver's id (this worker's
-    parent), then run the initializer."""
-    die_with(owner, server=os.getppid() if server is not None else None)
+def _start_worker(server, reader, initializer: Callable | None, initargs: tuple) -> None:
+    """In a new pool worker: end with the pool's owner (`end_with` its lifeline's `reader`), note the
+    forkserver's id (this worker's parent), then run the initializer."""
+    end_with(reader)
     if server is not None:
         server.value = os.getppid()
     if initializer is not None:
