@@ -24,43 +24,8 @@ from pathlib import Path
 
 from run import make_clip  # benchmarks/run.py (this folder is on sys.path when run as a script)
 
-REPO = Path(__file__).resolve().parents[1]
-BOMBS = {  # as tests/test_safe_inputs.py
-    "pkl: numpy.ndarray((1e9,), 'f4')": b"\x80\x02}X\x02\x00\x00\x00F1cnumpy\nndarray\nJ\x00\xca\x9a;\x85X"
-                                        b"\x02\x00\x00\x00f4\x86Rs.",
-    "pkl: _reconstruct, shape 1e9": b"\x80\x02}X\x02\x00\x00\x00F1cnumpy._core.multiarray\n_reconstruct\n"
-                                    b"cnumpy\nndarray\nJ\x00\xca\x9a;\x85X\x01\x00\x00\x00b\x87Rs.",
-    "pkl: array state, shape 1e9": b"\x80\x03}X\x02\x00\x00\x00F1cnumpy._core.multiarray\n_reconstruct\n"
-                                   b"cnumpy\nndarray\nK\x00\x85C\x01b\x87R(K\x01J\x00\xca\x9a;\x85cnumpy\ndtype\n"
-                                   b"X\x02\x00\x00\x00f4\x89\x88\x87R\x89C\x00tbs.",
-    "pkl: _frombuffer, shape 1e9": b"\x80\x03}X\x02\x00\x00\x00F1cnumpy._core.numeric\n_frombuffer\n(C\x00"
-                                   b"cnumpy\ndtype\nX\x02\x00\x00\x00f4\x89\x88\x87RJ\x00\xca\x9a;\x85X\x01\x00"
-                                   b"\x00\x00CtRs.",
-    "pkl: memo index 2^28": b"\x80\x02Nr\xf0\xff\xff\x0f.",
-}
-
-
-# the command as a child of a small process (its fork does not count this one's memory), its own peak RSS
-MEASURE = """
-import os, subprocess, sys, time
-proc = subprocess.Popen(sys.argv[2:], stdout=subprocess.DEVNULL)
-end = time.monotonic() + float(sys.argv[1])
-while not (done := os.wait4(proc.pid, os.WNOHANG))[0]:
-    if time.monotonic() > end:
-        proc.kill()
-    time.sleep(0.01)
-print(done[2].ru_maxrss / 1024)
-sys.exit(os.waitstatus_to_exitcode(done[1]) % 256)
-"""
-
-
-def run(args: list[str], timeout: float = 120.0) -> tuple[int, str, float, float]:
-    """(exit code, stderr, wall s, peak RSS MB) of `args` as a new process, killed after `timeout` s."""
-    start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c", MEASURE, str(timeout), *args], capture_output=True,
-                          text=True, cwd=REPO, env=dict(os.environ, HF_HUB_OFFLINE="1"), timeout=timeout + 60,
-                          check=False)
-    return done.returncode, done.stderr, time.perf_counter() - start, float(done.stdout)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from hostile import BOMBS, REPO, alive, descendants, run_measured  # tests/hostile.py: the tests' cases
 
 
 def cases(folder: Path, wav: Path, fifo: Path) -> dict[str, tuple[list[str], float]]:
@@ -74,7 +39,7 @@ def cases(folder: Path, wav: Path, fifo: Path) -> dict[str, tuple[list[str], flo
                 "from facegen.errors import FacegenError\n"
                 f"try:\n    read_templates_pkl({str(path)!r})\nexcept FacegenError as exc:\n"
                 "    sys.exit(f'facegen: {exc}')")
-        found[f"{name} ({len(data)} B)"] = ([sys.executable, "-c", code], 1.0)
+        found[f"pkl: {name} ({len(data)} B)"] = ([sys.executable, "-c", code], 1.0)
     for special in (str(fifo), "/dev/zero", "/dev/urandom"):
         kind = "FIFO" if special == str(fifo) else special
         found[f"animate --text-file {kind}"] = (
@@ -92,34 +57,6 @@ def cases(folder: Path, wav: Path, fifo: Path) -> dict[str, tuple[list[str], flo
             found[f"batch, a row's {column} = {kind}"] = (
                 [*facegen, "batch", str(manifest), "-o", str(folder / f"out-{manifest.stem}")], 2.0)
     return found
-
-
-def descendants(pid: int) -> dict[int, str]:
-    """{pid: start time} of the live descendants of `pid` (/proc)."""
-    children: dict[int, list[int]] = {}
-    started: dict[int, str] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if fields[0] not in "ZX":
-            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
-            started[int(stat.parent.name)] = fields[19]
-    found, todo = {}, [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            found[child] = started[child]
-            todo.append(child)
-    return found
-
-
-def alive(pid: int, start: str) -> bool:
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return False
-    return fields[0] not in "ZX" and fields[19] == start
 
 
 def kill_batch(folder: Path, wav: Path) -> tuple[int, float, int]:
@@ -159,7 +96,7 @@ def main() -> None:
         os.mkfifo(fifo)
         print(f"{'case':52} {'exit':>4} {'lines':>5} {'wall s':>7} {'peak MB':>8}  target")
         for name, (command, target) in cases(folder, wav, fifo).items():
-            code, err, wall, peak = run(command)
+            code, err, wall, peak = run_measured(command)
             ok = wall < target and peak < 300 and code in (1, 2) and len(err.strip().splitlines()) <= 1
             print(f"{name:52} {code:>4} {len(err.strip().splitlines()):>5} {wall:>7.2f} {peak:>8.0f}  "
                   f"< {target:g} s, < 300 MB: {'ok' if ok else 'MISSED'}", flush=True)

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 import soundfile as sf
 from helpers import grid_face, make_bundle
+from hostile import BOMBS, REFUSALS, REPO, alive, descendants, run_measured
 
 from facegen.alignment_files import read_alignment, read_phones
 from facegen.audio import load_audio
@@ -27,7 +28,6 @@ from facegen.batch_plan import check_plan, item_key
 from facegen.cli.options import read_text
 from facegen.errors import FacegenError
 
-REPO = Path(__file__).resolve().parents[1]
 POSIX = pytest.mark.skipif(not hasattr(os, "mkfifo") or not Path("/dev/zero").exists(),
                            reason="FIFOs and /dev/zero")
 
@@ -51,41 +51,8 @@ def one_line(exc: pytest.ExceptionInfo) -> str:
     return text
 
 
-# runs a command and prints its peak RSS (os.wait4: that process's own), from a process small enough that the
-# command's fork does not count this test process's memory
-_MEASURE = textwrap.dedent("""
-    import os, subprocess, sys, time
-    proc = subprocess.Popen(sys.argv[2:], stdout=subprocess.DEVNULL)
-    end = time.monotonic() + float(sys.argv[1])
-    while not (done := os.wait4(proc.pid, os.WNOHANG))[0]:
-        if time.monotonic() > end:
-            proc.kill()
-        time.sleep(0.01)
-    print(done[2].ru_maxrss / 1024)
-    sys.exit(os.waitstatus_to_exitcode(done[1]) % 256)
-""")
-
-
 # ---------------------------------------------------------------------------------------------------------
 # templates.pkl: no array allocated before its shape is checked against the file's size
-
-BOMBS = {  # pickles of a few dozen bytes whose arrays would take gigabytes
-    "ndarray called": b"\x80\x02}X\x02\x00\x00\x00F1cnumpy\nndarray\nJ\x00\xca\x9a;\x85X\x02\x00\x00\x00f4"
-                      b"\x86Rs.",
-    "reconstruct": b"\x80\x02}X\x02\x00\x00\x00F1cnumpy._core.multiarray\n_reconstruct\ncnumpy\nndarray\n"
-                   b"J\x00\xca\x9a;\x85X\x01\x00\x00\x00b\x87Rs.",
-    "state": b"\x80\x03}X\x02\x00\x00\x00F1cnumpy._core.multiarray\n_reconstruct\ncnumpy\nndarray\nK\x00\x85"
-             b"C\x01b\x87R(K\x01J\x00\xca\x9a;\x85cnumpy\ndtype\nX\x02\x00\x00\x00f4\x89\x88\x87R\x89C\x00tbs.",
-    "object state": b"\x80\x03}X\x02\x00\x00\x00F1cnumpy._core.multiarray\n_reconstruct\ncnumpy\nndarray\n"
-                    b"K\x00\x85C\x01b\x87R(K\x01J\x00\xca\x9a;\x85cnumpy\ndtype\nX\x02\x00\x00\x00O8\x89\x88"
-                    b"\x87R\x89]tbs.",
-    "frombuffer": b"\x80\x03}X\x02\x00\x00\x00F1cnumpy._core.numeric\n_frombuffer\n(C\x00cnumpy\ndtype\n"
-                  b"X\x02\x00\x00\x00f4\x89\x88\x87RJ\x00\xca\x9a;\x85X\x01\x00\x00\x00CtRs.",
-    "memo index": b"\x80\x02Nr\xf0\xff\xff\x0f.",  # the C unpickler's memo table: 4.3 GB, zeroed
-}
-REASONS = {"ndarray called": "calls numpy.ndarray directly", "reconstruct": "out of nothing",
-           "state": "more than the file holds", "object state": "makes a dtype of 'O8'",
-           "frombuffer": "more than the file holds", "memo index": "holds a NoneType"}
 
 _BOMB_RUN = textwrap.dedent("""
     import json, resource, sys, time
@@ -109,22 +76,21 @@ _BOMB_RUN = textwrap.dedent("""
 @pytest.mark.skipif(sys.platform != "linux", reason="peak memory from Linux's ru_maxrss")
 def test_templates_pkl_bombs_are_refused_before_any_allocation(tmp_path):
     paths = {}
-    for name, data in BOMBS.items():
+    for n, (name, data) in enumerate(BOMBS.items()):
         assert len(data) < 160
-        paths[name] = tmp_path / f"{name.replace(' ', '_')}.pkl"
+        paths[name] = tmp_path / f"bomb{n}.pkl"
         paths[name].write_bytes(data)
     found = tmp_path / "found.json"
-    done = subprocess.run([sys.executable, "-c", _MEASURE, "120", sys.executable, "-c", _BOMB_RUN, str(found),
-                           *map(str, paths.values())], capture_output=True, text=True, cwd=REPO, timeout=200,
-                          check=False)
-    assert done.returncode == 0, done.stderr
+    command = [sys.executable, "-c", _BOMB_RUN, str(found), *map(str, paths.values())]
+    code, err, _, peak = run_measured(command, timeout=60)
+    assert code == 0, err
     report = json.loads(found.read_text())
     for name, path in paths.items():
         said, seconds = report[str(path)]
-        assert said is not None and REASONS[name] in said, (name, said)
+        assert said is not None and REFUSALS[name] in said, (name, said)
         assert "\n" not in said and "MemoryError" not in said, (name, said)
         assert seconds < 5, (name, seconds)  # 15 s and 4.27 GB before (the target, < 1 s: benchmarks)
-    assert float(done.stdout) < 300, done.stdout  # the process's peak RSS (MB)
+    assert peak < 300, peak
 
 
 def test_templates_pkl_of_every_numpy_pickle_protocol_still_reads(tmp_path):
@@ -207,16 +173,6 @@ def test_text_inputs_larger_than_their_bound_are_refused_without_reading_them(tm
         read_text(None, str(big))
 
 
-def _run_measured(args: list[str], timeout: float = 120) -> tuple[int, str, float, float]:
-    """A facegen command in a new process: (exit code, stderr, wall seconds, peak RSS in MB), killed after
-    `timeout` s."""
-    start = time.perf_counter()
-    command = [sys.executable, "-c", _MEASURE, str(timeout), sys.executable, "-m", "facegen", *args]
-    done = subprocess.run(command, capture_output=True, text=True, cwd=REPO, timeout=timeout + 60,
-                          env=dict(os.environ, HF_HUB_OFFLINE="1"), check=False)
-    return done.returncode, done.stderr, time.perf_counter() - start, float(done.stdout)
-
-
 @POSIX
 @pytest.mark.skipif(sys.platform != "linux", reason="peak memory from Linux's ru_maxrss")
 def test_cli_refuses_special_files_in_one_line(specials, tmp_path):
@@ -236,13 +192,14 @@ def test_cli_refuses_special_files_in_one_line(specials, tmp_path):
         "manifest /dev/zero": ["batch", "/dev/zero", "-o", str(tmp_path / "o2")],
     }
     for name, args in runs.items():
-        code, err, seconds, peak = _run_measured(args)
+        code, err, seconds, peak = run_measured([sys.executable, "-m", "facegen", *args])
         assert code == 2 and len(err.strip().splitlines()) == 1, (name, code, err)
         assert "not a regular file" in err, (name, err)
         assert peak < 300, (name, peak)
         print(f"{name}: exit {code} in {seconds:.2f} s, peak {peak:.0f} MB")
     assert not any(tmp_path.glob("*.npy")) and not (tmp_path / "o1").exists()
-    code, err, seconds, peak = _run_measured(["batch", str(manifest), "-o", str(tmp_path / "o3")])
+    code, err, seconds, peak = run_measured([sys.executable, "-m", "facegen", "batch", str(manifest), "-o",
+                                              str(tmp_path / "o3")])
     assert code == 1, err
     items = json.loads((tmp_path / "o3" / "report.json").read_text())["items"]
     assert [i["status"] for i in items] == ["error"] * 3
@@ -373,34 +330,6 @@ def test_malformed_manifests_are_one_line_naming_the_line(tmp_path):
 # workers die with the batch
 
 
-def _descendants(pid: int) -> dict[int, str]:
-    """{pid: its start time} of every live descendant of `pid` (from /proc)."""
-    children: dict[int, list[int]] = {}
-    started: dict[int, str] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()  # state, parent, ... start time (20th)
-        except (OSError, IndexError):
-            continue
-        if fields[0] not in "ZX":
-            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
-            started[int(stat.parent.name)] = fields[19]
-    found, todo = {}, [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            found[child] = started[child]
-            todo.append(child)
-    return found
-
-
-def _alive(pid: int, start: str) -> bool:
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return False
-    return fields[0] not in "ZX" and fields[19] == start  # the same process, not a new one with its id
-
-
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_sigkill_of_the_batch_leaves_no_process_behind(tmp_path):
     from facegen.espeak import synthesize
@@ -417,14 +346,14 @@ def test_sigkill_of_the_batch_leaves_no_process_behind(tmp_path):
     try:
         deadline = time.monotonic() + 300
         while True:  # the workers run once the forkserver has children
-            family = _descendants(proc.pid)
-            if sum(len(_descendants(child)) for child in family) >= 2 or proc.poll() is not None:
+            family = descendants(proc.pid)
+            if sum(len(descendants(child)) for child in family) >= 2 or proc.poll() is not None:
                 break
             assert time.monotonic() < deadline, "no workers started"
             time.sleep(0.1)
         assert proc.poll() is None, "the batch finished before it was killed: give it more rows"
         time.sleep(1.0)  # at work
-        family = _descendants(proc.pid)
+        family = descendants(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
@@ -432,9 +361,9 @@ def test_sigkill_of_the_batch_leaves_no_process_behind(tmp_path):
         proc.wait()
     assert len(family) >= 3  # the forkserver and two workers (and multiprocessing's resource tracker)
     deadline = time.monotonic() + 5
-    while any(_alive(pid, start) for pid, start in family.items()) and time.monotonic() < deadline:
+    while any(alive(pid, start) for pid, start in family.items()) and time.monotonic() < deadline:
         time.sleep(0.1)
-    left = [pid for pid, start in family.items() if _alive(pid, start)]
+    left = [pid for pid, start in family.items() if alive(pid, start)]
     for pid in left:  # not for the next test
         os.kill(pid, signal.SIGKILL)
     assert left == [], f"{len(left)} of {len(family)} processes outlived the batch by 5 s"
