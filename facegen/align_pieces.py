@@ -34,7 +34,7 @@ MIN_PAUSE = 0.25  # s of quiet audio that may separate two pieces
 SCORED_SECONDS = 10.0  # audio the mismatch check scores at least (all of it when shorter)
 LOOKAHEAD = 150  # frames of the next piece aligned with a piece, so that its last words have what follows
 LOOKBEHIND = 10  # a piece's search starts this many frames before the last word of the piece before, with it
-MAX_EDGE = 30  # frames the first word's start and the last word's end may move out to the sound they are in
+MAX_EDGE = 40  # frames the first word's start and the last word's end may move out to the sound they are in
 
 
 def loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
