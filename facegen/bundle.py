@@ -61,10 +61,12 @@ class Bundle:
         s = str(speaker)
         if s in self.speakers:
             return self.speakers.index(s)
-        if s.lstrip("-").isdigit() and 0 <= int(s) < len(self.speakers):
+        if s.isdigit() and len(s) < 10 and int(s) < len(self.speakers):
             return int(s)
         valid = ", ".join(f"{i}={n}" for i, n in enumerate(self.speakers))
-        raise FacegenError(f"unknown speaker {s!r}: choose one of {valid} (name or index)")
+        shown = s if len(s) <= 40 else s[:40] + "..."
+        raise FacegenError(f"unknown speaker {shown!r}: choose one of {valid} (name or index)",
+                           param="speaker")
 
     def metadata(self) -> dict:
         return {

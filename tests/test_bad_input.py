@@ -47,7 +47,9 @@ CASES = {
     "animate: missing audio": "animate {i}/missing.wav --no-text -o {o}/out.usda",
     "animate: audio is not audio": "animate {i}/garbage.wav --no-text -o {o}/out.usda",
     "animate: unknown extension": "animate {i}/clip.wav --no-text -o {o}/out.xyz",
-    "animate: output folder missing": "animate {i}/clip.wav --no-text -o {o}/missing/out.usda",
+    "animate: output folder is a file": "animate {i}/clip.wav --no-text -o {i}/clip.wav/out.usda",
+    "animate: speaker of 5,000 digits": ("animate {i}/clip.wav --no-text -o {o}/out.npy --speaker "
+                                         + "9" * 5000),
     "animate: tolerance nan": "animate {i}/clip.wav --no-text -o {o}/out.glb --tolerance nan",
     "animate: tolerance inf": "animate {i}/clip.wav --no-text -o {o}/out.glb --tolerance inf",
     "animate: tolerance 1e300": "animate {i}/clip.wav --no-text -o {o}/out.glb --tolerance 1e300",

@@ -80,6 +80,10 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     # everything the path and options decide fails before any work: extension, folders, sidecar, options
     plan = plan_write(output, options=options, audio_source=audio, preview=preview)
     protect_inputs(plan.outputs, transcript=text_file, alignment=alignment, model=model, template=template)
+    if alignment:  # a FIFO, a device, a folder or an oversized file: refused before the model loads
+        from facegen.alignment_files import check_alignment_file
+
+        check_alignment_file(alignment)
     if preview:
         from facegen.render import check_output
 
