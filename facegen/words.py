@@ -173,29 +173,28 @@ def _spoken(token: str) -> list[str]:
 # stage directions
 
 _CLOSING = {"(": ")", "[": "]", "{": "}", "<": ">"}
+_OPENING = {close: opening for opening, close in _CLOSING.items()}
+_RE_BRACKET = re.compile(r"[()\[\]{}]|<(?!\s)|(?<!\s)>")  # <beep>, not a < b > c
+_RE_STARRED = re.compile(r"(?<![\w*])\*[^\s*](?:[^*]*[^\s*])?\*(?![\w*])")  # *sighs*, not 3 * 4
 
 
-def _direction_end(text: str, i: int) -> int | None:
-    """Where the stage direction opening at text[i] ends (the index after it), or None if none opens there.
-
-    Brackets nest ("[tone (long)]" is one); "<" and "*" only with no space just inside ("<beep>", "*sighs*";
-    "a < b" and "3 * 4" are not directions). An unclosed bracket is no direction.
-    """
-    opening = text[i]
-    if opening == "*":
-        if i + 1 >= len(text) or text[i + 1].isspace() or (i and text[i - 1].isalnum()):
-            return None
-        close = text.find("*", i + 1)
-        return close + 1 if close > 0 and not text[close - 1].isspace() else None
-    closing = _CLOSING.get(opening)
-    if closing is None or (opening == "<" and text[i + 1:i + 2].isspace()):
-        return None
-    depth = 0
-    for j in range(i, len(text)):
-        depth += (text[j] == opening) - (text[j] == closing)
-        if depth == 0:
-            return None if opening == "<" and text[j - 1].isspace() else j + 1
-    return None
+def _direction_spans(text: str) -> list[tuple[int, int]]:
+    """(start, end) of each outermost stage direction in `text`, in order: matching brackets ("[tone (long)]"
+    is one), "<" and ">" only with no space just inside, or asterisks around words ("*sighs*"). An unclosed
+    bracket opens none. One pass over the brackets: hostile text ("((((...") costs linear time."""
+    stacks: dict[str, list[int]] = {opening: [] for opening in _CLOSING}
+    pairs = [m.span() for m in _RE_STARRED.finditer(text)]
+    for m in _RE_BRACKET.finditer(text):
+        ch, at = m.group(), m.start()
+        if ch in _CLOSING:
+            stacks[ch].append(at)
+        elif stacks[_OPENING[ch]]:
+            pairs.append((stacks[_OPENING[ch]].pop(), at + 1))
+    outermost: list[tuple[int, int]] = []
+    for start, end in sorted(pairs, key=lambda pair: (pair[0], -pair[1])):
+        if not outermost or start >= outermost[-1][1]:
+            outermost.append((start, end))
+    return outermost
 
 
 def split_directions(text: str) -> tuple[str, list[str]]:
@@ -207,21 +206,15 @@ def split_directions(text: str) -> tuple[str, list[str]]:
     """
     spoken: list[str] = []
     directions: list[str] = []
-    i = 0
-    while i < len(text):
-        end = _direction_end(text, i) if text[i] in "([{<*" else None
-        if end is None:
-            spoken.append(text[i])
-            i += 1
-            continue
-        span = text[i:end]
+    done = 0
+    for start, end in _direction_spans(text):
+        span = text[start:end]
         if span[0] == "(" and not any(ch.isalpha() for ch in span):
-            spoken.append(span)
-        else:
-            directions.append(" ".join(span.split()))
-            spoken.append(" ")
-        i = end
-    return "".join(spoken), directions
+            continue
+        spoken += [text[done:start], " "]
+        directions.append(" ".join(span.split()))
+        done = end
+    return "".join(spoken) + text[done:], directions
 
 
 def no_words(text: str) -> FacegenError:

@@ -42,6 +42,14 @@ def test_stage_directions_are_set_apart(text, spoken, directions):
     assert got_directions == directions
 
 
+def test_unclosed_brackets_cost_linear_time():
+    """One pass over the brackets: a million unclosed ones (a quadratic scan would take hours) open nothing,
+    and a balanced direction inside an unclosed bracket is still one."""
+    assert split_directions("(" * 1_000_000 + " hi") == ("(" * 1_000_000 + " hi", [])
+    assert split_directions("<" * 1_000_000 + "x") == ("<" * 1_000_000 + "x", [])
+    assert split_directions("so (he says [quietly] yes") == ("so (he says   yes", ["[quietly]"])
+
+
 def test_stage_directions_never_reach_the_aligner():
     assert normalize_transcript("Press one (beep) now [tone] *sighs*") == [
         ("Press", ["press"]), ("one", ["one"]), ("now", ["now"])]
