@@ -379,13 +379,14 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
     start, end = speech_edges(loud, first, last)
     words[0] = (words[0][0], start, words[0][2])
     words[-1] = (words[-1][0], words[-1][1], end)
-    moved = {k for k, edge in ((0, start != first), (len(words) - 1, end != last)) if edge and with_phones}
+    _check_match(loud, words, gaps, free)
+    moved = {k for k, edge in ((0, start != first), (len(words) - 1, end != last))
+             if edge and with_phones and len(phones) == len(words)}
     for k in moved:
         with _LOCK:
             alignment = _word_alone(pcm, spoken[k][1:], words[k][1], words[k][2] + 1, cmn)
-            if alignment is not None:
-                phones[k] = _phones(alignment, 0, 1, words[k][1], duration)[0]
-    _check_match(loud, words, gaps, free)
+            again = [] if alignment is None else _phones(alignment, 0, 1, words[k][1], duration)
+            phones[k] = again[0] if again else phones[k]
     times: dict[int, list[float]] = {}
     for (index, _, _), (_, first, last) in zip(spoken, words, strict=True):
         start, end = first * FRAME, min((last + 1) * FRAME, duration)
