@@ -92,10 +92,10 @@ def main(argv: list[str] | None = None) -> int:
 
     per_word: list[list[float]] = []
 
-    def recording(loud, words, gaps, free):
+    def recording(loud, words, gaps, free, snr_db=0.0):
         scores.append(align.match_scores(loud, words, gaps, free))
         per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
-        return check(loud, words, gaps, free)
+        return check(loud, words, gaps, free, snr_db)
 
     align._check_match = recording
     cases = []

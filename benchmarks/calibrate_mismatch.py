@@ -1,4 +1,5 @@
-"""Calibration of the aligner's mismatch check (facegen.align._check_match, its bound MAX_WORD_GAP).
+"""Calibration of the aligner's mismatch check (facegen.align._check_match and its bound on the
+median word score gap, facegen.align_pieces.word_gap_bound).
 
 The 20 sentences of benchmarks/bench_batch.py (Flite, Festival and espeak-ng voices in turn) are aligned
 against their own transcript and against the next sentence's, clean and with pink, white and babble noise at
@@ -36,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     from bench_mismatch import snr_db
 
     from facegen import align
+    from facegen.align_pieces import NOISY_WORD_GAP
     from facegen.audio import load_audio
     from facegen.errors import FacegenError
     from facegen.synth.augment import add_noise, make_noise
@@ -48,10 +50,10 @@ def main(argv: list[str] | None = None) -> int:
     per_word: list[list[float]] = []
     check = align._check_match
 
-    def recording(loud, words, gaps, free):
+    def recording(loud, words, gaps, free, snr_db=0.0):
         seen.append(align.match_scores(loud, words, gaps, free))
         per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
-        return check(loud, words, gaps, free)
+        return check(loud, words, gaps, free, snr_db)
 
     align._check_match = recording
     results = {"matching": [], "wrong": []}  # (condition, None = no alignment | (unexplained, gap), error)
@@ -89,13 +91,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{kind}: {len(runs)} runs; no alignment {none}, too much speech outside words {outside}; "
               f"score gaps of the rest {min(gaps):.0f} to {max(gaps):.0f} (median {np.median(gaps):.0f})")
         refused = [r for r in runs if r[2] is not None]
-        print(f"  refused with MAX_WORD_GAP = {align.MAX_WORD_GAP:g}: {len(refused)}/{len(runs)}"
+        print(f"  refused with the shipped bounds: {len(refused)}/{len(runs)}"
               + "".join(f"\n    {name}: {error[:110]}" for name, _, error in refused if kind == "matching"))
     print("refused by condition (matching, wrong): " + ", ".join(
         f"{name} {sum(r[2] is not None for r in results['matching'] if r[0] == name)}/"
         f"{sum(r[2] is not None for r in results['wrong'] if r[0] == name)}" for name, _ in CONDITIONS))
     print("bound  matching refused  wrong refused")
-    for bound in range(int(align.MAX_WORD_GAP) - 6, int(align.MAX_WORD_GAP) + 7, 2):
+    for bound in range(int(NOISY_WORD_GAP) - 6, int(NOISY_WORD_GAP) + 7, 2):
         counts = [sum(r[1] is None or r[1][0] > align.MAX_UNEXPLAINED or r[1][1] > bound for r in runs)
                   for runs in results.values()]
         print(f"{bound:5d}  {counts[0]:8d}/{len(results['matching'])}  "

@@ -34,6 +34,8 @@ from facegen.align_pieces import (
     prefix_grammar,
     scored,
     speech_edges,
+    speech_snr_db,
+    word_gap_bound,
     word_window,
 )
 from facegen.audio import resample
@@ -70,11 +72,10 @@ _CONFIGS = {
     "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False, "ds": 10, "dict": os.devnull},
     "recognize": {},
 }
-# A transcript that does not match the speech (see _check_match): more than this share of the loud
-# frames left outside its words, or a median word fitting the sounds worse than the best free phone
-# sequence by more than this (per-frame gap to the best HMM state, pocketsphinx's log units).
+# A transcript that does not match the speech (see _check_match): more than this share of the loud frames
+# left outside its words, or a median word fitting the sounds worse than the best free phone sequence
+# (per-frame gap to the best HMM state, pocketsphinx's log units) by more than align_pieces.word_gap_bound.
 MAX_UNEXPLAINED = 0.3
-MAX_WORD_GAP = 25.0
 
 
 def _decoder(kind: str):
@@ -255,33 +256,34 @@ def _mismatch(detail: str) -> FacegenError:
 
 
 def _check_match(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray,
-                 free: np.ndarray) -> None:
-    """Raise if the alignment shows that the transcript is not what was said.
-
-    Two signs, measured on synthetic speech (12 sentences and a paragraph, 14 voices, clean, 10 and
-    5 dB SNR) against matching and mismatched transcripts:
-    - speech the transcript does not explain is left to silence/noise segments: a transcript with
-      half of the words leaves 34-60 % of the loud frames outside words, a matching one under 7 %;
-    - words forced onto sounds they are not fit them badly: the median word's state gap exceeds
-      the free phone loop's by 16-64 (27+ when clean, 30+ at 10 dB) for a wrong sentence, by -5 to 17
-      for the right one (13 at most down to 10 dB SNR). A typo or a swapped word passes, as it should.
-    End to end on those 48 clips: every matching transcript passes; 46/48 wrong sentences and 47/48
-    half transcripts are refused (the misses are at 10 and 5 dB SNR).
-    Since then the free loop scores every third frame (ds=3) and its gaps are the loop's own phone scores (no
-    second alignment of its phones): 40 % less alignment time; the bound went from 22 to 25.
-    benchmarks/calibrate_mismatch.py measures it: the 20 sentences of benchmarks/bench_batch.py (Flite,
-    Festival and espeak-ng voices), each against its own and the next sentence, clean and with pink, white and
-    babble noise at 10 and 5 dB SNR (7 conditions, 140 runs each). Matching transcripts: 4 find no alignment
-    (at 5 dB), the rest score -13 to 37; refused 0/20 clean, 2/60 at 10 dB, 7/60 at 5 dB. Wrong ones: 47 find
-    no alignment or leave too much speech outside words, the rest score 15 to 51; refused 19/20 clean, 54/60
-    at 10 dB, 53/60 at 5 dB.
+                 free: np.ndarray, snr_db: float = 0.0) -> None:
+    """Raise if the alignment shows that the transcript is not what was said. Two signs:
+    - speech the transcript does not explain is left to silence/noise segments: more than MAX_UNEXPLAINED of
+      the loud frames outside the words (matching transcripts of recorded prompts: 0.25 at most);
+    - words forced onto sounds they are not fit them badly: the median word's state gap over the free phone
+      loop above align_pieces.word_gap_bound (16 for clean speech, 25 under noise at 15 dB SNR and below).
+    Measured: benchmarks/bench_mismatch.py (Asterisk's recorded English prompts, 8 kHz, the odd half: 275/275
+    matching scripts pass, 100/105 swapped rows refused) and benchmarks/calibrate_mismatch.py (synthetic
+    voices clean and at 10 and 5 dB SNR: matching refused 0/20 clean, 2/60 at 10 dB, 7/60 at 5 dB).
     `gaps` and `free` are NaN outside the pieces scored (align_pieces.scored): their words are left out.
     """
     unexplained, excess = match_scores(loud, words, gaps, free)
     if unexplained > MAX_UNEXPLAINED:
-        raise _mismatch(f"{unexplained:.0%} of the speech lies outside its words")
-    if excess > MAX_WORD_GAP:
-        raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {MAX_WORD_GAP:.0f}")
+        raise _mismatch(f"{unexplained:.0%} of the speech lies outside its words, {_where(loud, words)}")
+    bound = word_gap_bound(snr_db, len(words))
+    if excess > bound:
+        raise _mismatch(f"its words fit the sounds poorly, score gap {excess:.0f} > {bound:.0f}")
+
+
+def _where(loud: np.ndarray, words: list[tuple[str, int, int]]) -> str:
+    """Where the speech the words leave out lies: at the start, at the end or in the middle (the most)."""
+    outside = loud.copy()
+    for _, first, last in words:
+        outside[first:last + 1] = False
+    first, last = (words[0][1], words[-1][2]) if words else (len(loud), len(loud))
+    parts = {"at the start": outside[:first].sum(), "at the end": outside[last + 1:].sum(),
+             "in the middle": outside[first:last + 1].sum()}
+    return max(parts, key=parts.get)
 
 
 def match_scores(loud: np.ndarray, words: list[tuple[str, int, int]], gaps: np.ndarray,
@@ -379,7 +381,7 @@ def _align(audio: np.ndarray, sample_rate: int, transcript: str,
     start, end = speech_edges(loud, first, last)
     words[0] = (words[0][0], start, words[0][2])
     words[-1] = (words[-1][0], words[-1][1], end)
-    _check_match(loud, words, gaps, free)
+    _check_match(loud, words, gaps, free, speech_snr_db(audio))
     moved = {k for k, edge in ((0, start != first), (len(words) - 1, end != last))
              if edge and with_phones and len(phones) == len(words)}
     for k in moved:
