@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import gzip
 import json
-import re
 import sys
 import time
 from pathlib import Path
@@ -32,7 +31,6 @@ import numpy as np
 
 SOUNDS = Path("/usr/share/asterisk/sounds/en")
 SCRIPT = Path("/usr/share/doc/asterisk-core-sounds-en/core-sounds-en.txt.gz")
-DIRECTION = re.compile(r"\[[^\]]*\]|\([^)]*\)|<[^>]*>")
 
 
 def library(sounds: Path, script: Path) -> list[tuple[str, Path, str]]:
@@ -51,7 +49,10 @@ def library(sounds: Path, script: Path) -> list[tuple[str, Path, str]]:
 
 
 def spoken_words(text: str) -> list[str]:
-    return DIRECTION.sub(" ", text).split()
+    """The words of a script line said aloud (its stage directions left out, as facegen does)."""
+    from facegen.words import split_directions
+
+    return split_directions(text)[0].split()
 
 
 def snr_db(samples: np.ndarray, rate: int) -> float:

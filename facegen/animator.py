@@ -62,6 +62,7 @@ class Clip(NetworkInput):
     mesh: Mesh | None = None
     fps: float | None = None  # the Animation's frame rate (None: the network's)
     idle: bool = False  # silent audio: the neutral face in every frame, without the network
+    directions: tuple[str, ...] = ()  # the transcript's stage directions ("(laughs)", "[beep]"): not aligned
 
 
 class Animator:
@@ -175,6 +176,10 @@ class Animator:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                  template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile)
             clip.fps = check_fps(fps)
+            if text:
+                from facegen.words import split_directions
+
+                clip.directions = tuple(split_directions(text)[1])
             return clip
         finally:
             if ahead is not None and ahead is not aligned:
@@ -191,7 +196,9 @@ class Animator:
         check_speech(samples, sr, cfg.fps, name=f"audio file {audio}", silence_ok=True)
         T = num_frames(len(samples) / sr, cfg.fps)
         if is_silent(samples):  # a character listening: the neutral face, no network, no words
-            if text is not None or alignment is not None:
+            from facegen.words import normalize_transcript
+
+            if (text and normalize_transcript(text)) or alignment is not None:  # "(silence)" is no word
                 raise FacegenError(f"audio file {audio} is silent (peak below -80 dBFS) but words were "
                                    "given: pass the recording with the speech, or no words for an idle clip",
                                    param=("text", "alignment"))
@@ -325,6 +332,7 @@ class Animator:
                 "words": [{"word": w.text, "start": round(w.start, 4), "end": round(w.end, 4)}
                           for w in clip.words],
                 "word_timing": clip.word_timing,
+                **({"stage_directions": list(clip.directions)} if clip.directions else {}),
             },
         )
 

@@ -51,18 +51,28 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
     return align.recognize(samples, sr), RECOGNISED
 
 
+FOREIGN_SHARE = 0.25  # of the words missing from the English dictionary: another language (fr 0.47, es 0.31)
+
+
 def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None,
            with_phones: bool) -> tuple[list, list | None]:
     """Forced alignment of `text` (words, and phones if `with_phones`): the answer of the process started
     ahead, else aligned here (also when that process gave no answer)."""
     from facegen import align
 
-    found = ahead.result() if ahead is not None else None
-    if found is not None:
-        return found
-    if with_phones:
-        return align.align_phones(samples, sr, text)
-    return align.align(samples, sr, text), None
+    try:
+        found = ahead.result() if ahead is not None else None
+        if found is not None:
+            return found
+        if with_phones:
+            return align.align_phones(samples, sr, text)
+        return align.align(samples, sr, text), None
+    except FacegenError as exc:  # words the English dictionary lacks: another language? say so
+        if str(exc).startswith("the transcript does not match") and align.unknown_share(text) > FOREIGN_SHARE:
+            raise FacegenError(f"{exc}; many of its words are not English: the aligner knows English only, "
+                               "so align speech in another language with a tool for that language and pass "
+                               "its word timings", param=("text", "alignment")) from exc
+        raise
 
 
 def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,

@@ -202,3 +202,30 @@ def test_audio_whose_header_lies_is_refused_before_it_is_read(tmp_path):
     sf.write(tmp_path / "stereo.wav", stereo, 48000, subtype="FLOAT")
     mono, rate = load_audio(tmp_path / "stereo.wav")  # read block by block, the channels averaged
     assert rate == 48000 and mono.dtype == np.float32 and np.allclose(mono, stereo.mean(axis=1), atol=1e-7)
+
+
+# ---- what the mismatch check says
+
+
+def test_a_transcript_missing_its_end_says_so_and_foreign_words_get_the_language_hint(animator, tmp_path):
+    with pytest.raises(FacegenError, match="outside its words, at the end") as info:
+        animator.animate(WAV, text="What an excellent room you have, sir.")  # half of the line
+    assert "English" not in str(info.value) and "text" in info.value.params
+    from facegen.audio import write_wav
+    from facegen.espeak import synthesize
+
+    french = "Bonjour, je voudrais une chambre pour deux nuits, avec une grande fenêtre sur la mer."
+    speech = synthesize(french, voice="fr")
+    write_wav(speech.audio, speech.sample_rate, tmp_path / "fr.wav")
+    with pytest.raises(FacegenError, match="not English: the aligner knows English only"):
+        animator.animate(tmp_path / "fr.wav", text=french)
+
+
+def test_stage_directions_are_kept_in_the_metadata_not_aligned(animator, tmp_path):
+    anim = animator.animate(WAV, text="(calmly) " + TEXT + " [door closes]")
+    assert anim.metadata["stage_directions"] == ["(calmly)", "[door closes]"]
+    assert [w["word"] for w in anim.metadata["words"]][:2] == ["What", "an"]
+    wav = tmp_path / "quiet.wav"
+    sf.write(wav, np.zeros(16000, np.float32), 16000)
+    idle = animator.animate(wav, text="(ten seconds of silence)")  # a script line for a silent take
+    assert idle.metadata["words"] == [] and idle.metadata["stage_directions"] == ["(ten seconds of silence)"]
