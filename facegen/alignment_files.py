@@ -76,23 +76,28 @@ def read_alignment(path: str | os.PathLike, duration: float | None = None) -> li
     negative, reversed or overlapping times; the error names the file and the problem.
     """
     path = Path(path)
+    words = _parsed(path, _read_textgrid, _read_json, _read_csv,
+                    lambda why: f"alignment {path} is malformed ({why}): write it as Gentle/WhisperX/plain "
+                    "JSON, a TextGrid or a CSV with word,start,end columns")
+    _validate(words, path, duration)
+    return words
+
+
+def _parsed(path: Path, textgrid, from_json, from_csv, malformed):
+    """An alignment file's text parsed by its kind (a TextGrid, JSON, else CSV) with the given parser; a file
+    that does not parse is a FacegenError saying `malformed(reason)`."""
     text = _read_text(path)
     try:
         if _is_textgrid(path, text):
-            words = _read_textgrid(text)
-        elif text.startswith(("{", "[")):
-            words = _read_json(json.loads(text))
-        else:
-            words = _read_csv(text)
+            return textgrid(text)
+        if text.startswith(("{", "[")):
+            return from_json(json.loads(text))  # malformed JSON raises ValueError
+        return from_csv(text)
     except RecursionError as exc:
         raise FacegenError(f"alignment {path} is nested too deeply to be word timings: write it as Gentle/"
                            "WhisperX/plain JSON, a TextGrid or a CSV with word,start,end columns") from exc
-    # malformed JSON raises ValueError
     except (ValueError, KeyError, TypeError, IndexError, AttributeError, csv.Error) as exc:
-        raise FacegenError(f"alignment {path} is malformed ({exc}): write it as Gentle/WhisperX/plain JSON, "
-                           "a TextGrid or a CSV with word,start,end columns") from exc
-    _validate(words, path, duration)
-    return words
+        raise FacegenError(malformed(exc)) from exc
 
 
 def read_phones(path: str | os.PathLike, duration: float | None = None,
@@ -106,20 +111,8 @@ def read_phones(path: str | os.PathLike, duration: float | None = None,
     so). Like `read_alignment`, negative, reversed or (with `duration`) late times are a FacegenError.
     """
     path = Path(path)
-    text = _read_text(path)
-    try:
-        if _is_textgrid(path, text):
-            labelled = _textgrid_phones(text)
-        elif text.startswith(("{", "[")):
-            labelled = _json_phones(json.loads(text))
-        else:
-            labelled = None  # CSV: words only
-    except RecursionError as exc:
-        raise FacegenError(f"alignment {path} is nested too deeply to be word timings: write it as Gentle/"
-                           "WhisperX/plain JSON, a TextGrid or a CSV with word,start,end columns") from exc
-    except (ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
-        raise FacegenError(f"the phones of {path} are malformed ({exc}): fix the file or align "
-                           "again") from exc
+    labelled = _parsed(path, _textgrid_phones, _json_phones, lambda _text: None,  # CSV: words only
+                       lambda why: f"the phones of {path} are malformed ({why}): fix the file or align again")
     return None if labelled is None else _cmu_phones(labelled, path, duration, reporter)
 
 
