@@ -101,9 +101,12 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
             if f.frames > MAX_SECONDS * sr:  # as the header says: a lying one is read in bounded blocks below
                 raise FacegenError(f"{name} is {f.frames / sr / 3600:.1f} hours long; facegen animates up to "
                                    f"{MAX_SECONDS // 3600} hours: cut it into parts")
-            # block by block, the channels averaged as they come: a long stereo file never exists as floats
-            blocks = [b.mean(axis=1) if b.shape[1] > 1 else b[:, 0]
-                      for b in f.blocks(blocksize=1 << 20, dtype="float32", always_2d=True)]
+            # block by block, the channels averaged as they come: a long stereo file never exists as floats.
+            # (Not SoundFile.blocks: it sizes the last block by the header's frame count, an estimate for MP3,
+            # and hands back the samples past the real end uninitialised.)
+            blocks = []
+            while len(block := f.read(1 << 20, dtype="float32", always_2d=True)):
+                blocks.append(block.mean(axis=1) if block.shape[1] > 1 else block[:, 0])
     except sf.LibsndfileError as exc:
         raise FacegenError(
             f"cannot read {name} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): "

@@ -229,3 +229,20 @@ def test_stage_directions_are_kept_in_the_metadata_not_aligned(animator, tmp_pat
     sf.write(wav, np.zeros(16000, np.float32), 16000)
     idle = animator.animate(wav, text="(ten seconds of silence)")  # a script line for a silent take
     assert idle.metadata["words"] == [] and idle.metadata["stage_directions"] == ["(ten seconds of silence)"]
+
+
+def test_an_mp3_reads_to_its_real_end(tmp_path):
+    """MP3's frame count in the header is an estimate: block reading must stop at the real end (soundfile's
+    `blocks` handed back uninitialised samples past it, so the MP3 delay measure failed now and then)."""
+    import io
+
+    from facegen.audio import load_audio
+    from facegen.exchange import mp3
+
+    probe = np.zeros(22050, np.float32)
+    probe[4410:11025] = 0.3 * np.random.default_rng(1).standard_normal(6615).astype(np.float32)
+    data = mp3._lame(probe, 22050, 32)
+    decoded, rate = load_audio(data)
+    expected, _ = sf.read(io.BytesIO(data), dtype="float32")
+    assert rate == 22050 and np.array_equal(decoded, expected)
+    assert 0 < mp3.measured_delay(22050, 32) < 4 * 1152
