@@ -293,23 +293,22 @@ class Animator:
         from facegen.inference import FrameStream, frame_stream, states_at_rate
 
         out: list[Animation | None] = [None] * len(clips)
-        order = sorted(range(len(clips)), key=lambda i: clips[i].num_frames)
         fps = self.bundle.features.fps
-        for i in order:
-            if clips[i].idle:  # the template in every frame: a stream of no states and no weights
-                frames = num_frames(len(clips[i].samples) / clips[i].sample_rate, clips[i].fps or fps)
-                vertices = clips[i].mesh.vertices
-                still = FrameStream(np.zeros((frames, 1), np.float32),
-                                    np.zeros((vertices.size, 1), np.float32), vertices)
-                out[i] = self.animation(clips[i], still)
-        order = [i for i in order if not clips[i].idle]
+
+        def output_frames(clip: Clip) -> int:
+            return num_frames(len(clip.samples) / clip.sample_rate, clip.fps or fps)
+
+        for i, clip in enumerate(clips):
+            if clip.idle:  # the template in every frame: a stream of no states and no weights
+                vertices = clip.mesh.vertices
+                out[i] = self.animation(clip, FrameStream(np.zeros((output_frames(clip), 1), np.float32),
+                                                          np.zeros((vertices.size, 1), np.float32), vertices))
+        order = sorted((i for i, c in enumerate(clips) if not c.idle), key=lambda i: clips[i].num_frames)
         for b in range(0, len(order), batch_size):
             ids = order[b:b + batch_size]
             for i, states in zip(ids, self.states([clips[i] for i in ids]), strict=True):
-                clip = clips[i]
-                if clip.fps is not None and clip.fps != fps:  # another frame rate: the states resampled
-                    frames = num_frames(len(clip.samples) / clip.sample_rate, clip.fps)
-                    states = states_at_rate(states, fps, clip.fps, frames)
+                clip = clips[i]  # at another frame rate: the states resampled (a no-op at the network's)
+                states = states_at_rate(states, fps, clip.fps or fps, output_frames(clip))
                 out[i] = self.animation(clip, frame_stream(self.bundle, states, clip.mesh.vertices))
         return out
 

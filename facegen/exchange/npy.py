@@ -39,15 +39,6 @@ def write(
     return [path] if wav is None else [path, wav]
 
 
-def builtin_template(num_vertices: int) -> Mesh | None:
-    """The built-in model's template when `num_vertices` is its vertex count (a .npy that `facegen animate`
-    wrote with the default model), else None: a .npy holds positions only, and this is its face."""
-    from facegen.bundle import read_template
-
-    template = read_template(None)
-    return template if template.num_vertices == num_vertices else None
-
-
 def load_frames(path: str | os.PathLike) -> np.ndarray:
     """The raw [T, 3V] array of a .npy file (no pickles); unreadable files are a FacegenError."""
     path = Path(path)

@@ -214,15 +214,14 @@ def _default_template(path: Path) -> Mesh:
     """The built-in model's template for a .npy of its vertex count (what `facegen animate` writes with the
     default model); any other count is a FacegenError asking for the mesh."""
     from facegen.bundle import read_template
-    from facegen.exchange.npy import builtin_template, load_frames
+    from facegen.exchange.npy import load_frames
 
     count = load_frames(path).shape[1] // 3
-    template = builtin_template(count)
-    if template is None:
+    template = read_template(None)
+    if count != template.num_vertices:
         raise FacegenError(
             f"{path.name} stores only vertex positions, {count} per frame, and the built-in model's face has "
-            f"{read_template(None).num_vertices}: pass the template mesh that gives its faces",
-            param="template"
+            f"{template.num_vertices}: pass the template mesh that gives its faces", param="template"
         )
     return template
 
