@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{args.script} is missing: apt-get install asterisk-core-sounds-en-wav", file=sys.stderr)
         return 2
 
-    from facegen import align
+    from facegen import align, transcript_match
     from facegen.audio import load_audio
     from facegen.errors import FacegenError
 
@@ -89,16 +89,16 @@ def main(argv: list[str] | None = None) -> int:
                          if len(w) > 3 and w.isalpha()})
 
     scores: list[tuple[float, float]] = []
-    check = align._check_match
+    check = align.judge
 
     per_word: list[list[float]] = []
 
     def recording(loud, words, gaps, free, snr_db=0.0):
-        scores.append(align.match_scores(loud, words, gaps, free))
+        scores.append(transcript_match.match_scores(loud, words, gaps, free))
         per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
         return check(loud, words, gaps, free, snr_db)
 
-    align._check_match = recording
+    align.judge = recording
     cases = []
 
     def run(kind: str, name: str, samples, rate, text: str) -> None:
@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             if (i + 1) % 25 == 0:
                 print(f"  {i + 1}/{len(lines)} lines", file=sys.stderr, flush=True)
     finally:
-        align._check_match = check
+        align.judge = check
 
     print(f"{len(lines)} lines ({args.half} half of {args.sounds})\n")
     print("| case | runs | accepted | refused |\n|---|---|---|---|")

@@ -1,5 +1,5 @@
-"""Calibration of the aligner's mismatch check (facegen.align._check_match and its bound on the
-median word score gap, facegen.align_pieces.word_gap_bound).
+"""Calibration of the aligner's mismatch check (facegen.transcript_match.judge and its bound on the
+median word score gap, facegen.transcript_match.word_gap_bound).
 
 The 20 sentences of benchmarks/bench_batch.py (Flite, Festival and espeak-ng voices in turn) are aligned
 against their own transcript and against the next sentence's, clean and with pink, white and babble noise at
@@ -36,11 +36,11 @@ def main(argv: list[str] | None = None) -> int:
     from bench_batch import make_clips
     from bench_mismatch import snr_db
 
-    from facegen import align
-    from facegen.align_pieces import NOISY_WORD_GAP
+    from facegen import align, transcript_match
     from facegen.audio import load_audio
     from facegen.errors import FacegenError
     from facegen.synth.augment import add_noise, make_noise
+    from facegen.transcript_match import NOISY_WORD_GAP
 
     folder = Path(tempfile.mkdtemp(prefix="facegen-calibrate-"))
     make_clips(folder, args.clips)
@@ -48,14 +48,14 @@ def main(argv: list[str] | None = None) -> int:
         rows = list(csv.DictReader(f))
     seen: list[tuple[float, float]] = []
     per_word: list[list[float]] = []
-    check = align._check_match
+    check = align.judge
 
     def recording(loud, words, gaps, free, snr_db=0.0):
-        seen.append(align.match_scores(loud, words, gaps, free))
+        seen.append(transcript_match.match_scores(loud, words, gaps, free))
         per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
         return check(loud, words, gaps, free, snr_db)
 
-    align._check_match = recording
+    align.judge = recording
     results = {"matching": [], "wrong": []}  # (condition, None = no alignment | (unexplained, gap), error)
     dump = []
     for i, row in enumerate(rows):
@@ -78,16 +78,16 @@ def main(argv: list[str] | None = None) -> int:
                              "gap": seen[0][1] if seen else float("nan"),
                              "word_gaps": per_word[0] if per_word else [], "why": error or "",
                              "outcome": "refused" if error else "accepted"})
-    align._check_match = check
+    align.judge = check
     if args.json:
         import json
 
         args.json.write_text(json.dumps(dump, indent=1))
 
     for kind, runs in results.items():
-        gaps = [r[1][1] for r in runs if r[1] is not None and r[1][0] <= align.MAX_UNEXPLAINED]
+        gaps = [r[1][1] for r in runs if r[1] is not None and r[1][0] <= transcript_match.MAX_UNEXPLAINED]
         none = sum(r[1] is None for r in runs)
-        outside = sum(r[1] is not None and r[1][0] > align.MAX_UNEXPLAINED for r in runs)
+        outside = sum(r[1] is not None and r[1][0] > transcript_match.MAX_UNEXPLAINED for r in runs)
         print(f"{kind}: {len(runs)} runs; no alignment {none}, too much speech outside words {outside}; "
               f"score gaps of the rest {min(gaps):.0f} to {max(gaps):.0f} (median {np.median(gaps):.0f})")
         refused = [r for r in runs if r[2] is not None]
@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{sum(r[2] is not None for r in results['wrong'] if r[0] == name)}" for name, _ in CONDITIONS))
     print("bound  matching refused  wrong refused")
     for bound in range(int(NOISY_WORD_GAP) - 6, int(NOISY_WORD_GAP) + 7, 2):
-        counts = [sum(r[1] is None or r[1][0] > align.MAX_UNEXPLAINED or r[1][1] > bound for r in runs)
+        counts = [sum(r[1] is None or r[1][0] > transcript_match.MAX_UNEXPLAINED or r[1][1] > bound for r in runs)
                   for runs in results.values()]
         print(f"{bound:5d}  {counts[0]:8d}/{len(results['matching'])}  "
               f"{counts[1]:8d}/{len(results['wrong'])}")

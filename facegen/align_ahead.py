@@ -4,7 +4,7 @@ model.
 A new `facegen animate` spends its first second or more importing torch and loading the bundle, and as long
 again aligning the transcript: pocketsphinx holds the GIL, so a thread cannot overlap the two, but a forked
 process can, on the second core. `start` forks before torch is imported (the child never touches torch, so
-the fork is safe) and returns an `AlignAhead` whose `result()` gives what `align.align` / `align.align_phones`
+the fork is safe) and returns an `AlignAhead` whose `result()` gives what `align.align_checked`
 would have given in this process (the same code on the same audio: the same words and phones), or raises
 their FacegenError. A child that dies without an answer (killed, a bug) makes `result()` return None: the
 caller aligns in its own process, where any error shows as usual.
@@ -32,22 +32,24 @@ from facegen.runtime import PROFILE, cores
 
 @dataclass
 class Aligned:
-    """A forced alignment done already: the words and phones (None without), or the FacegenError's message;
-    `seconds` and `cpu_seconds` it took where it ran."""
+    """A forced alignment done already: the words, phones (None without) and the transcript's Match (not
+    refused here: the caller decides, facegen.word_timing.forced), or the FacegenError's message; `seconds`
+    and `cpu_seconds` it took where it ran."""
 
     words: list | None = None
     phones: list | None = None
+    match: object = None  # facegen.transcript_match.Match
     error: str | None = None
     error_param: str | tuple[str, ...] | None = None  # the parameter the FacegenError names
     seconds: float = 0.0
     cpu_seconds: float = 0.0
 
-    def result(self) -> tuple[list, list | None]:
-        """(words, phones or None) as align gives them; raises its FacegenError."""
+    def result(self) -> tuple[list, list | None, object]:
+        """(words, phones or None, Match) as align.align_checked gives them; raises its FacegenError."""
         if self.error is not None:
             raise FacegenError(self.error, param=self.error_param)
         PROFILE.add("alignment_in_parallel", self.seconds)
-        return self.words, self.phones
+        return self.words, self.phones, self.match
 
     def ready(self) -> bool:
         """Done already: always."""
@@ -59,18 +61,15 @@ class Aligned:
 
 def align_file(audio: str | os.PathLike, text: str, with_phones: bool) -> Aligned:
     """Align `text` to the audio file `audio` here (with its phones if `with_phones`), as the clip's own
-    animation would: read with load_audio, aligned by align.align / align.align_phones."""
+    animation would: read with load_audio, aligned by align.align_checked."""
     from facegen import align
     from facegen.audio import load_audio
 
     start, cpu = time.perf_counter(), time.process_time()
     try:
         samples, rate = load_audio(audio)
-        if with_phones:
-            words, phones = align.align_phones(samples, rate, text)
-        else:
-            words, phones = align.align(samples, rate, text), None
-        found = Aligned(words, phones)
+        done = align.align_checked(samples, rate, text, with_phones)
+        found = Aligned(done.words, done.phones, done.match)
     except FacegenError as exc:
         found = Aligned(error=str(exc), error_param=exc.param)
     found.seconds, found.cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
@@ -90,9 +89,10 @@ class AlignAhead:
         except (EOFError, OSError):
             return True
 
-    def result(self) -> tuple[list, list | None] | None:
-        """(words, phones or None) as align gives them, None when the child gave no answer; raises the
-        child's FacegenError. The child's own alignment time is the profile's "alignment_in_parallel"."""
+    def result(self) -> tuple[list, list | None, object] | None:
+        """(words, phones or None, Match) as align.align_checked gives them, None when the child gave no
+        answer; raises the child's FacegenError. The child's own alignment time is the profile's
+        "alignment_in_parallel"."""
         try:
             answer = self._receiver.recv()
         except (EOFError, OSError):

@@ -47,52 +47,6 @@ def loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
     return energy > low + 0.5 * (high - low)
 
 
-def speech_snr_db(audio: np.ndarray) -> float:
-    """How far the speech stands above the recording's noise (dB): the 90th against the 10th percentile of the
-    10 ms frames' energy. Clean studio and telephone prompts measure 25-80 dB, speech under noise at 10 dB SNR
-    about 15, at 5 dB about 11."""
-    frames = audio[:len(audio) // HOP * HOP].reshape(-1, HOP).astype(np.float64)
-    if len(frames) == 0:
-        return 0.0
-    energy = (frames ** 2).mean(1) + 1e-12
-    return float(10 * np.log10(np.percentile(energy, 90) / np.percentile(energy, 10)))
-
-
-# The mismatch check's bound on the median word's score gap (align._check_match), by how clean the speech is:
-# 16 from 20 dB up (matching transcripts of clean speech stay under 6 on recorded prompts, 15.5 at most on
-# synthetic voices; swapped ones mostly score 15-60), 25 at 15 dB and below (noise widens both: matching
-# ones reach 30-37 at 5-10 dB SNR), linear in between; 25 for lines of fewer than 3 words, whose median is one
-# or two words. benchmarks/bench_mismatch.py and benchmarks/calibrate_mismatch.py measure it.
-CLEAN_WORD_GAP, NOISY_WORD_GAP = 16.0, 25.0
-CLEAN_SNR_DB, NOISY_SNR_DB = 20.0, 15.0
-SHORT_LINE_WORDS = 3
-
-
-def word_gap_bound(snr_db: float, words: int) -> float:
-    """The largest median word score gap a matching transcript has at this SNR (see above)."""
-    if words < SHORT_LINE_WORDS:
-        return NOISY_WORD_GAP
-    clean = min(max((snr_db - NOISY_SNR_DB) / (CLEAN_SNR_DB - NOISY_SNR_DB), 0.0), 1.0)
-    return NOISY_WORD_GAP + (CLEAN_WORD_GAP - NOISY_WORD_GAP) * clean
-
-
-# Both signs halfway: over 15 % of the speech outside the words and a median gap over 8 — no matching script
-# of the recorded prompts (odd half) or of the synthetic voices, clean or noisy, does both; swapped ones that
-# pass the single bounds often do.
-PART_UNEXPLAINED, PART_WORD_GAP = 0.15, 8.0
-
-
-def left_out(loud: np.ndarray, words: list[tuple[str, int, int]]) -> str:
-    """Where the speech the words leave out lies: at the start, at the end or in the middle (the most)."""
-    outside = loud.copy()
-    for _, first, last in words:
-        outside[first:last + 1] = False
-    first, last = (words[0][1], words[-1][2]) if words else (len(loud), len(loud))
-    parts = {"at the start": outside[:first].sum(), "at the end": outside[last + 1:].sum(),
-             "in the middle": outside[first:last + 1].sum()}
-    return max(parts, key=parts.get)
-
-
 def pieces(loud: np.ndarray) -> list[tuple[int, int]]:
     """(first frame, end frame) of consecutive pieces covering every frame: each cut in the middle of a
     run of at least MIN_PAUSE quiet frames, once the piece has PIECE_SECONDS; the last piece at least half

@@ -29,7 +29,8 @@ from facegen.audio import check_speech, is_silent, load_audio, mel_features, num
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, check_topology, read_mesh
 from facegen.runtime import PROFILE, SILENT, Reporter, select_device, silent
-from facegen.word_timing import NONE, clip_words, clip_words_and_phones, force_aligned
+from facegen.transcript_match import Match
+from facegen.word_timing import NONE, Timing, clip_words, clip_words_and_phones, force_aligned
 
 LONG_INPUT_SECONDS = 20.0  # stage-by-stage progress is reported for clips at least this long
 BATCH_SIZE = 16  # clips whose decoder BiLSTMs run as one packed batch
@@ -63,6 +64,7 @@ class Clip(NetworkInput):
     fps: float | None = None  # the Animation's frame rate (None: the network's)
     idle: bool = False  # silent audio: the neutral face in every frame, without the network
     directions: tuple[str, ...] = ()  # the transcript's stage directions ("(laughs)", "[beep]"): not aligned
+    match: Match | None = None  # how well the transcript matches the speech (forced alignment only)
 
 
 class Animator:
@@ -166,7 +168,7 @@ class Animator:
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
                 fps: float | None = None, reporter: Reporter = SILENT, aligned: Aligned | None = None,
-                meanwhile: Callable[[], object] | None = None) -> Clip:
+                meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error") -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
@@ -174,7 +176,8 @@ class Animator:
         ahead = self._take_ahead(audio, text) or aligned
         try:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
-                                 template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile)
+                                 template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile,
+                                 on_mismatch=on_mismatch)
             clip.fps = check_fps(fps)
             if text:
                 from facegen.words import split_directions
@@ -186,7 +189,7 @@ class Animator:
                 self.close()
 
     def _prepare(self, audio, *, text, alignment, no_text, speaker, template, reporter: Reporter, ahead,
-                 meanwhile) -> Clip:
+                 meanwhile, on_mismatch) -> Clip:
         bundle = self.bundle
         spk = bundle.speaker_index(speaker)
         mesh = self.mesh(template)
@@ -210,9 +213,8 @@ class Animator:
         with PROFILE.stage("audio_features"):  # before the words: done while an alignment started ahead runs
             mel = mel_features(samples, sr, cfg, bundle.mel_filters)
 
-        words: list = []
-        source = NONE
-        text_feats = phone_feats = None
+        timing = Timing([], NONE)
+        text_feats = None
         uses_text = bundle.config.uses_text and not no_text
         early: tuple[list[str], np.ndarray] | None = None  # the transcript's words and their vectors
         if ahead is not None and not ahead.ready():  # work that needs no word times, while they are found
@@ -228,16 +230,17 @@ class Animator:
                     early = names, backend.word_vectors(names)
         if bundle.config.n_phones:
             with PROFILE.stage("alignment"):
-                words, source, phone_feats = clip_words_and_phones(
-                    samples, sr, T, cfg.fps, text=text, alignment=alignment, no_text=no_text,
-                    reporter=reporter, ahead=ahead)
+                timing = clip_words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,
+                                               no_text=no_text, reporter=reporter, ahead=ahead,
+                                               on_mismatch=on_mismatch)
         if uses_text:
             if not bundle.config.n_phones:
                 with PROFILE.stage("alignment"):
-                    words, source = clip_words(samples, sr, text=text, alignment=alignment, reporter=reporter,
-                                               ahead=ahead)
+                    timing = clip_words(samples, sr, text=text, alignment=alignment, reporter=reporter,
+                                        ahead=ahead, on_mismatch=on_mismatch)
             from facegen.text import frame_features, text_features
 
+            words = timing.words
             reporter.progress(f"text features ({bundle.text_backend}) for {len(words)} words")
             if early is not None and early[0] == [w.text for w in words]:
                 text_feats = frame_features(words, early[1], T, cfg)
@@ -247,8 +250,9 @@ class Animator:
                     text_feats = text_features(words, backend, T, cfg)
 
         reporter.progress(f"inference for {T} frames")
-        return Clip(mel, text_feats, spk, phone_feats, audio_name=Path(audio).name, samples=samples,
-                    sample_rate=sr, words=words, word_timing=source, mesh=mesh)
+        return Clip(mel, text_feats, spk, timing.phones, audio_name=Path(audio).name, samples=samples,
+                    sample_rate=sr, words=timing.words, word_timing=timing.source, mesh=mesh,
+                    match=timing.match)
 
     # ---------------------------------------------------------------------------------------- the network
 
@@ -332,6 +336,7 @@ class Animator:
                           for w in clip.words],
                 "word_timing": clip.word_timing,
                 **({"stage_directions": list(clip.directions)} if clip.directions else {}),
+                **({"transcript_match": clip.match.as_dict()} if clip.match is not None else {}),
             },
         )
 
@@ -341,7 +346,7 @@ class Animator:
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
                 fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
-                meanwhile: Callable[[], object] | None = None) -> Animation:
+                meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error") -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
@@ -349,7 +354,8 @@ class Animator:
         try:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
-                                template=template, fps=fps, reporter=reporter, meanwhile=meanwhile)
+                                template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
+                                on_mismatch=on_mismatch)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -364,7 +370,7 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             no_text: bool = False, speaker: str | int | None = None, bundle=None,
             template: str | os.PathLike | Mesh | None = None, text_model: str | None = None,
             device: str = "auto", fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
-            meanwhile: Callable[[], object] | None = None) -> Animation:
+            meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error") -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -379,10 +385,13 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     its `progress` and notes the user should always see (e.g. "no transcript given") as its `note`, e.g.
     `Reporter(progress=print, note=print)`. If the forced alignment started ahead (see Animator) still
     runs once the model is loaded, `meanwhile` is called (e.g. to import the writer's libraries).
+    `on_mismatch`: a transcript that does not match the speech is refused ("error", a FacegenError) or
+    animated with a note ("warn"); either way the metadata's "transcript_match" holds its score
+    (facegen.transcript_match.Match: 1 sure, below 0.5 a mismatch).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
-        stream=stream, reporter=reporter, meanwhile=meanwhile)
+        stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch)
 
 
 MAX_FPS = 240.0  # output frames per second at most

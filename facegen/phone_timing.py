@@ -8,8 +8,8 @@ word's time in the file, which stays the authority on when a word is said. A run
 tried word by word; a word that still does not (too short for its phones, noise, a word not said) gets its
 espeak-ng pronunciation spread over its time, vowels twice as long as consonants.
 
-The decoding is align.py's: this module calls its private helpers `_LOCK`, `_pcm16k`, `_pcm_bytes`,
-`_clip_cmn`, `_align_piece`, `_state_pass` and `_phones` (the aligner's own passes, not copies).
+The decoding is the aligner's own (facegen.sphinx's decoders, facegen.align's `align_piece`, `state_pass` and
+`word_phones`), not a copy.
 """
 
 from __future__ import annotations
@@ -86,17 +86,17 @@ def _align_runs(samples: np.ndarray, sample_rate: int, words: list[Word],
                 runs: list[list[int]]) -> dict[int, list[Phone]]:
     """The phones of the words of `runs` that align (word index → phones in the word's time), each run over
     its span, then the words of a run that does not align one by one."""
-    from facegen import align
+    from facegen import sphinx
 
     found: dict[int, list[Phone]] = {}
-    with align._LOCK:
+    with sphinx.LOCK:
         try:
-            audio = align._pcm16k(samples, sample_rate)
+            audio = sphinx.pcm16k(samples, sample_rate)
         except FacegenError:  # silent or too short: nothing to align
             return found
-        pcm = align._pcm_bytes(audio)
-        duration = len(audio) / align.RATE
-        cmn = align._clip_cmn(pcm)
+        pcm = sphinx.pcm_bytes(audio)
+        duration = len(audio) / sphinx.RATE
+        cmn = sphinx.clip_cmn(pcm)
         for run in runs:
             run = [i for i in run if _tokens(words[i])]
             phones = _align_span(pcm, cmn, [words[i] for i in run], duration) if run else []
@@ -109,20 +109,20 @@ def _align_runs(samples: np.ndarray, sample_rate: int, words: list[Word],
 def _align_span(pcm: bytes, cmn: str, words: list[Word], duration: float) -> list[list[Phone]] | None:
     """Each of `words`' phones, force-aligned over the audio of their span (PAD either side) and fitted to the
     word's own time; None when pocketsphinx finds no alignment."""
-    from facegen import align
+    from facegen import align, sphinx
 
-    first = max(0, int((words[0].start - PAD) / align.FRAME))
-    last = min(len(pcm) // (2 * HOP), int(np.ceil((words[-1].end + PAD) / align.FRAME)))
+    first = max(0, int((words[0].start - PAD) / sphinx.FRAME))
+    last = min(len(pcm) // (2 * HOP), int(np.ceil((words[-1].end + PAD) / sphinx.FRAME)))
     if last <= first:
         return None
     part = pcm[first * HOP * 2:last * HOP * 2]
     counts = [len(_tokens(w)) for w in words]
     tokens = [t for w in words for t in _tokens(w)]
     try:
-        found = align._align_piece(part, tokens, last - first, last - first, cmn, prefix=False)
+        found = align.align_piece(part, tokens, last - first, last - first, cmn, prefix=False)
         if found is None:
             return None
-        per_token = align._phones(align._state_pass(found[0], part, cmn), 0, len(tokens), first, duration)
+        per_token = align.word_phones(align.state_pass(found[0], part, cmn), 0, len(tokens), first, duration)
         out, k = [], 0
         for word, count in zip(words, counts, strict=True):
             out.append(_fit([p for phones in per_token[k:k + count] for p in phones], word))

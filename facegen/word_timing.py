@@ -9,16 +9,29 @@ its own is align_ahead.py's (`ahead`: its `AlignAhead` or `Aligned`).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 from facegen.align_ahead import AlignAhead, Aligned
 from facegen.errors import FacegenError
 from facegen.runtime import SILENT, Reporter
+from facegen.transcript_match import Match
 
 FORCED, FILE, RECOGNISED, NONE = ("forced alignment", "alignment file", "speech recognition",
                                   "none (--no-text)")
 FILE_PHONES_ALIGNED = "alignment file + phones aligned"  # a file's words, (some of) their phones aligned here
+
+
+@dataclass
+class Timing:
+    """A clip's words in time, where they came from (FORCED, FILE, ...), its phones per frame (models with a
+    phone stream) and, for a forced alignment, how well the transcript matches the speech."""
+
+    words: list
+    source: str
+    phones: np.ndarray | None = None
+    match: Match | None = None
 
 
 def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
@@ -34,50 +47,70 @@ def _check_transcript(text: str) -> None:
 
 def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
                alignment: str | os.PathLike | None = None, reporter: Reporter = SILENT,
-               ahead: AlignAhead | Aligned | None = None) -> tuple[list, str]:
+               ahead: AlignAhead | Aligned | None = None, on_mismatch: str = "error") -> Timing:
     """Word timings for the clip and where they came from (alignment file, forced alignment, recognition);
-    `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py)."""
-    from facegen import align
+    `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py);
+    `on_mismatch`: see `forced`."""
+    from facegen import recognition
     from facegen.alignment_files import read_alignment
 
     if alignment is not None:
-        return read_alignment(alignment, duration=len(samples) / sr), FILE
+        return Timing(read_alignment(alignment, duration=len(samples) / sr), FILE)
     if text is not None:
         _check_transcript(text)
         reporter.progress("aligning the transcript to the speech (pocketsphinx)")
-        return forced(samples, sr, text, ahead, with_phones=False)[0], FORCED
+        words, _, match = forced(samples, sr, text, ahead, False, on_mismatch, reporter)
+        return Timing(words, FORCED, match=match)
     reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
                   "transcript; give the transcript or an alignment file for better upper-face motion)")
-    return align.recognize(samples, sr), RECOGNISED
+    return Timing(recognition.recognize(samples, sr), RECOGNISED)
 
 
 FOREIGN_SHARE = 0.25  # of the words missing from the English dictionary: another language (fr 0.47, es 0.31)
 
 
-def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None,
-           with_phones: bool) -> tuple[list, list | None]:
-    """Forced alignment of `text` (words, and phones if `with_phones`): the answer of the process started
-    ahead, else aligned here (also when that process gave no answer)."""
+def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None, with_phones: bool,
+           on_mismatch: str = "error", reporter: Reporter = SILENT) -> tuple[list, list | None, Match]:
+    """Forced alignment of `text`: its words, phones (if `with_phones`) and Match (facegen.transcript_match) —
+    the answer of the process started ahead, else aligned here (also when that process gave no answer).
+    A transcript that does not match the speech is refused (`on_mismatch` "error") or animated with a
+    warning ("warn"); one whose words cannot be placed at all is always refused."""
     from facegen import align
+    from facegen.transcript_match import ON_MISMATCH, mismatch
 
+    if on_mismatch not in ON_MISMATCH:
+        raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
+                           param="on_mismatch")
     try:
         found = ahead.result() if ahead is not None else None
-        if found is not None:
-            return found
-        if with_phones:
-            return align.align_phones(samples, sr, text)
-        return align.align(samples, sr, text), None
-    except FacegenError as exc:  # words the English dictionary lacks: another language? say so
-        if str(exc).startswith("the transcript does not match") and align.unknown_share(text) > FOREIGN_SHARE:
-            raise FacegenError(f"{exc}; many of its words are not English: the aligner knows English only, "
-                               "so align speech in another language with a tool for that language and pass "
-                               "its word timings", param=("text", "alignment")) from exc
-        raise
+        if found is None:
+            done = align.align_checked(samples, sr, text, with_phones)
+            found = done.words, done.phones, done.match
+        words, phones, match = found
+        if match.problem is not None and on_mismatch == "error":
+            raise mismatch(match.problem)
+    except FacegenError as exc:
+        raise _foreign(exc, text) from exc
+    if match.problem is not None:
+        reporter.note(f"the transcript may not match the speech ({match.problem}; match score "
+                      f"{match.score:.2f}): animated with it as asked — check the transcript")
+    return words, phones, match
+
+
+def _foreign(exc: FacegenError, text: str) -> FacegenError:
+    """A mismatch refusal, with a hint when many of the words are not English (FOREIGN_SHARE)."""
+    from facegen import sphinx
+
+    if str(exc).startswith("the transcript does not match") and sphinx.unknown_share(text) > FOREIGN_SHARE:
+        return FacegenError(f"{exc}; many of its words are not English: the aligner knows English only, so "
+                            "align speech in another language with a tool for that language and pass its "
+                            "word timings", param=("text", "alignment"))
+    return exc
 
 
 def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
                           alignment, no_text: bool, reporter: Reporter,
-                          ahead: AlignAhead | Aligned | None = None) -> tuple[list, str, np.ndarray]:
+                          ahead: AlignAhead | Aligned | None = None, on_mismatch: str = "error") -> Timing:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript; the words of an alignment file with its phones, or, where it has none, the phones aligned
     inside its word times (`alignment_phones`); or without a transcript (also with --no-text, which only drops
@@ -86,15 +119,15 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
 
     if alignment is not None:
         words, phones, source = alignment_phones(samples, sr, alignment, reporter)
-        return words, source, phone_frames(phones, num_frames, fps)
+        return Timing(words, source, phone_frames(phones, num_frames, fps))
     if text is not None and not no_text:
         _check_transcript(text)
-        words, phones = forced(samples, sr, text, ahead, with_phones=True)
-        return words, FORCED, phone_frames(phones, num_frames, fps)
-    from facegen import align
+        words, phones, match = forced(samples, sr, text, ahead, True, on_mismatch, reporter)
+        return Timing(words, FORCED, phone_frames(phones, num_frames, fps), match)
+    from facegen import align, recognition
 
     # no transcript: the recogniser's words, force-aligned again for their phones
-    recognised = align.recognize(samples, sr)
+    recognised = recognition.recognize(samples, sr)
     try:
         words, phones = align.align_phones(samples, sr, " ".join(w.text for w in recognised))
         found = phone_frames(phones, num_frames, fps)
@@ -105,8 +138,8 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     if not no_text:
         reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
                       "a transcript; give the transcript or an alignment file for better lips and brows)")
-        return words, RECOGNISED, found
-    return [], NONE, found
+        return Timing(words, RECOGNISED, found)
+    return Timing([], NONE, found)
 
 
 def alignment_phones(samples: np.ndarray, sr: int, alignment: str | os.PathLike,

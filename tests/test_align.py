@@ -9,13 +9,14 @@ import json
 import numpy as np
 import pytest
 
-from facegen.align import align, align_phones, recognize
+from facegen.align import align, align_phones
 from facegen.align_pieces import loud_frames, pieces, scored
 from facegen.alignment_files import read_alignment, write_alignment
 from facegen.audio import resample
 from facegen.errors import FacegenError
 from facegen.espeak import Speech, pronounce, synthesize
 from facegen.phonetics import espeak_to_cmu
+from facegen.recognition import recognize
 from facegen.words import Word, normalize_transcript
 
 SENTENCES = [
@@ -256,9 +257,10 @@ def test_pieces_give_the_timings_of_one_search_over_the_clip(corpus, monkeypatch
     early)."""
     import facegen.align as align_module
     import facegen.align_pieces
+    from facegen.sphinx import get_decoder
 
     for kind in ("align", "align-wide", "align-nofiller", "phone-loop"):
-        assert align_module._decoder(kind).config["cmn"] == "live"
+        assert get_decoder(kind).config["cmn"] == "live"
     audio, text, _ = long_clip(corpus)
     rate = corpus[0][1].sample_rate
     split = align_phones(audio, rate, text)
@@ -522,13 +524,13 @@ def test_alignment_of_synthetic_speech_round_trips_through_a_file(tmp_path, corp
 def test_no_writable_temporary_folder_is_one_clear_error(corpus, monkeypatch):
     """The decoders read a temporary copy of the acoustic model's feat.params: without a writable temporary
     folder that is a FacegenError naming the fix, not an OSError."""
-    import facegen.align as align_module
+    import facegen.sphinx
 
     def unwritable(*args, **kwargs):
         raise PermissionError(13, "Permission denied", "/tmp/facegen-align-x")
 
-    monkeypatch.setattr(align_module, "_DECODERS", {})
-    monkeypatch.setattr(align_module.tempfile, "TemporaryDirectory", unwritable)
+    monkeypatch.setattr(facegen.sphinx, "DECODERS", {})
+    monkeypatch.setattr(facegen.sphinx.tempfile, "TemporaryDirectory", unwritable)
     text, speech = corpus[0]
     with pytest.raises(FacegenError, match="set TMPDIR to a writable folder"):
         align(padded(speech), speech.sample_rate, text)

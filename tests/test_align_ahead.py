@@ -78,23 +78,30 @@ def test_a_wrong_transcript_is_still_one_line_exit_2_and_nothing_written(tmp_pat
 
 
 def test_the_answer_is_what_align_phones_gives(new_process):
-    from facegen.align import align_phones
+    from facegen.align import align_checked, align_phones
 
     ahead = align_ahead.start(WAV, TEXT, with_phones=True)
-    words, phones = ahead.result()
+    words, phones, match = ahead.result()
     assert (words, phones) == align_phones(*load_audio(WAV), TEXT)
+    assert match == align_checked(*load_audio(WAV), TEXT, with_phones=True).match and match.problem is None
     assert len(words) == len(TEXT.split()) and len(phones) > 2 * len(words)
 
 
-def test_a_transcript_error_comes_back_as_the_same_facegen_error(new_process):
-    from facegen.align import align
+def test_a_mismatch_comes_back_with_its_match_and_an_error_as_the_same_facegen_error(new_process):
+    """The forked aligner refuses nothing that matches badly (the caller decides: --on-mismatch), and gives
+    back the FacegenError of a transcript that cannot be aligned at all."""
+    from facegen.align import align, align_checked
 
-    wrong = "Seven purple elephants were dancing slowly across the frozen river."
+    wrong = " ".join(TEXT.split()[:len(TEXT.split()) // 2])  # half the words: the rest of the speech unexplained
     ahead = align_ahead.start(WAV, wrong, with_phones=False)
+    _, _, match = ahead.result()
+    here = align_checked(*load_audio(WAV), wrong, with_phones=False).match
+    assert match == here and match.problem is not None and match.score < 0.5
+    ahead = align_ahead.start(WAV, "?!", with_phones=False)
     with pytest.raises(FacegenError) as forked:
         ahead.result()
     with pytest.raises(FacegenError) as here:
-        align(*load_audio(WAV), wrong)
+        align(*load_audio(WAV), "?!")
     assert str(forked.value) == str(here.value)
 
 
@@ -128,19 +135,19 @@ def test_no_fork_where_it_gains_nothing_or_is_unsafe(monkeypatch):
 
 
 def test_align_file_answers_as_the_forked_aligner_does():
-    """align_file (the batch's main process aligning waiting items): align_phones' words and phones, or its
-    FacegenError raised by result(), with the time it took."""
+    """align_file (the batch's main process aligning waiting items): align_phones' words and phones and the
+    Match, or its FacegenError raised by result(), with the time it took."""
     from facegen.align import align, align_phones
 
     done = align_ahead.align_file(WAV, TEXT, with_phones=True)
-    assert done.result() == align_phones(*load_audio(WAV), TEXT) and done.error is None
+    assert done.result()[:2] == align_phones(*load_audio(WAV), TEXT) and done.error is None
+    assert done.result()[2].score > 0.5
     assert 0 < done.cpu_seconds and 0 < done.seconds
-    wrong = "Seven purple elephants were dancing slowly across the frozen river."
-    failed = align_ahead.align_file(WAV, wrong, with_phones=False)
+    failed = align_ahead.align_file(WAV, "?!", with_phones=False)
     with pytest.raises(FacegenError) as here:
-        align(*load_audio(WAV), wrong)
+        align(*load_audio(WAV), "?!")
     assert failed.error == str(here.value) and failed.words is None
-    with pytest.raises(FacegenError, match="does not match the speech"):
+    with pytest.raises(FacegenError, match="the transcript is empty"):
         failed.result()
 
 
@@ -165,7 +172,7 @@ def test_while_the_alignment_runs_the_word_vectors_are_computed_and_meanwhile_ca
 
     called = []
     monkeypatch.setattr(facegen.text, "text_features", no_late_features)
-    meanwhile = Running(found.words, found.phones)
+    meanwhile = Running(found.words, found.phones, found.match)
     clip = animator.prepare(WAV, text=TEXT, aligned=meanwhile,
                             meanwhile=lambda: called.append(import_writer("out.usdc")))
     assert called == [None] and "pxr.UsdGeom" in sys.modules and "pxr.UsdMedia" in sys.modules

@@ -282,8 +282,9 @@ def test_a_phone_model_animates_from_a_words_only_file(speech, tmp_path):
     path = write_alignment(words, tmp_path / "words.csv")
     T = round(len(audio) / sr * 25)
     notes = []
-    got, source, frames = clip_words_and_phones(audio, sr, T, 25.0, text=None, alignment=path, no_text=False,
-                                                reporter=Reporter(note=notes.append))
+    timing = clip_words_and_phones(audio, sr, T, 25.0, text=None, alignment=path, no_text=False,
+                                   reporter=Reporter(note=notes.append))
+    got, source, frames = timing.words, timing.source, timing.phones
     assert source == FILE_PHONES_ALIGNED and notes == [] and frames.shape == (T, len(INDEX))
     speaking = np.zeros(T, bool)
     for w in got:

@@ -41,7 +41,7 @@ def align(audio, text, text_file, output, phones):
 
         words, found = align_phones(samples, sr, transcript)
     else:
-        words, _ = clip_words(samples, sr, text=transcript, reporter=Reporter(note=say_stderr))
+        words = clip_words(samples, sr, text=transcript, reporter=Reporter(note=say_stderr)).words
         found = None
     if output:
         from facegen.atomic import output_folders
