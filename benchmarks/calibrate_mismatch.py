@@ -98,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         f"{sum(r[2] is not None for r in results['wrong'] if r[0] == name)}" for name, _ in CONDITIONS))
     print("bound  matching refused  wrong refused")
     for bound in range(int(NOISY_WORD_GAP) - 6, int(NOISY_WORD_GAP) + 7, 2):
-        counts = [sum(r[1] is None or r[1][0] > transcript_match.MAX_UNEXPLAINED or r[1][1] > bound for r in runs)
+        most = transcript_match.MAX_UNEXPLAINED
+        counts = [sum(r[1] is None or r[1][0] > most or r[1][1] > bound for r in runs)
                   for runs in results.values()]
         print(f"{bound:5d}  {counts[0]:8d}/{len(results['matching'])}  "
               f"{counts[1]:8d}/{len(results['wrong'])}")
