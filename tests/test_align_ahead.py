@@ -92,7 +92,7 @@ def test_a_mismatch_comes_back_with_its_match_and_an_error_as_the_same_facegen_e
     back the FacegenError of a transcript that cannot be aligned at all."""
     from facegen.align import align, align_checked
 
-    wrong = " ".join(TEXT.split()[:len(TEXT.split()) // 2])  # half the words: the rest of the speech unexplained
+    wrong = " ".join(TEXT.split()[:len(TEXT.split()) // 2])  # half the words: the rest unexplained
     ahead = align_ahead.start(WAV, wrong, with_phones=False)
     _, _, match = ahead.result()
     here = align_checked(*load_audio(WAV), wrong, with_phones=False).match
