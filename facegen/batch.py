@@ -53,6 +53,7 @@ class Job:
     text_file: Path | None = None
     manifest: Path | None = None
     fps: float | None = None  # the output frame rate (None: the model's)
+    on_mismatch: str = "error"  # a transcript not matching its speech: refused, or animated and flagged
     options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
 
     @property
@@ -76,6 +77,12 @@ class JobResult:
     validation: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     skipped: bool = False
+    match: dict | None = None  # how well the transcript matches the speech (transcript_match.Match.as_dict)
+
+    @property
+    def flagged(self) -> bool:
+        """Written although its transcript may not match the speech (on_mismatch "warn")."""
+        return self.error is None and self.match is not None and self.match.get("problem") is not None
 
     @property
     def ok(self) -> bool:
@@ -349,7 +356,8 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                     raise FacegenError(job.problem)
                 prepared[i] = animator.prepare(job.audio, text=job.text, alignment=job.alignment,
                                                no_text=job.no_text, speaker=job.speaker, fps=job.fps,
-                                               reporter=SILENT.noting(note), aligned=job.aligned)
+                                               reporter=SILENT.noting(note), aligned=job.aligned,
+                                               on_mismatch=job.on_mismatch)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error
@@ -393,7 +401,9 @@ def run_batch(jobs: Sequence[Job], *, animator: Animator | None = None, batch_si
         result = JobResult(job, notes=notes)
         if isinstance(anim, FacegenError):
             result.error = one_line(anim)
+            result.match = (anim.details or {}).get("transcript_match")
         else:
+            result.match = anim.metadata.get("transcript_match")
             result.frames, result.audio_seconds = anim.num_frames, len(anim.audio) / anim.sample_rate
             try:
                 for target in job.targets:

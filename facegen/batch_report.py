@@ -22,8 +22,9 @@ _XML_BAD = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")  # characters 
 
 
 def counts(results: list[JobResult]) -> dict[str, int]:
+    """Items per status, and those written with a transcript that may not match ("flagged")."""
     found = Counter(r.status for r in results)
-    return {s: found.get(s, 0) for s in STATUSES}
+    return {**{s: found.get(s, 0) for s in STATUSES}, "flagged": sum(r.flagged for r in results)}
 
 
 def summary_line(results: list[JobResult], seconds: float, out_dir: str | os.PathLike) -> str:
@@ -32,7 +33,8 @@ def summary_line(results: list[JobResult], seconds: float, out_dir: str | os.Pat
     c = counts(results)
     audio = sum(r.audio_seconds for r in results if r.status != "skipped")
     speed = f" ({audio / seconds:.1f}x real time)" if audio and seconds > 0 else ""
-    return (f"{len(results)} items in {seconds:.1f} s: {c['passed']} passed, {c['failed']} failed, "
+    flagged = f" ({c['flagged']} flagged: transcript may not match)" if c["flagged"] else ""
+    return (f"{len(results)} items in {seconds:.1f} s: {c['passed']} passed{flagged}, {c['failed']} failed, "
             f"{c['error']} error{'s' if c['error'] != 1 else ''}, {c['skipped']} skipped{speed}; reports in "
             f"{Path(out_dir) / 'report.json'} and report.xml")
 
@@ -48,7 +50,8 @@ def item_dict(result: JobResult, out_dir: str | os.PathLike) -> dict:
             "error": result.error, "files": [os.path.relpath(f, out_dir) for f in result.files],
             "frames": result.frames, "audio_seconds": round(result.audio_seconds, 3),
             "seconds": round(result.seconds, 3), "cpu_seconds": round(result.cpu_seconds, 3),
-            "validation": result.validation, "notes": result.notes}
+            "validation": result.validation, "notes": result.notes, "match": result.match,
+            "flagged": result.flagged}
 
 
 def write_reports(results: list[JobResult], out_dir: str | os.PathLike, run: dict) -> tuple[Path, Path]:
@@ -78,6 +81,12 @@ def junit(results: list[JobResult], out_dir: Path, run: dict) -> ET.ElementTree:
         case = ET.SubElement(suite, "testcase", {
             "classname": "facegen.batch", "name": _text(f"line {r.job.line}: {item_name(r, out_dir)}"),
             "file": _text(str(run.get("manifest", ""))), "line": str(r.job.line), "time": f"{r.seconds:.3f}"})
+        if r.match is not None:  # CI tools show a testcase's properties: sort lines by how sure facegen is
+            properties = ET.SubElement(case, "properties")
+            found = {"match_score": f"{r.match['score']:.3f}", "match_problem": r.match.get("problem")}
+            for name, value in found.items():
+                if value is not None:
+                    ET.SubElement(properties, "property", {"name": name, "value": _text(value)})
         if r.status == "error":
             ET.SubElement(case, "error", {"message": _text(r.error), "type": "error"}).text = _text(
                 f"{r.job.audio}: {r.error}")

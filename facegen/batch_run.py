@@ -60,6 +60,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  ray_address: str | None = None, model: str | os.PathLike | None = None,
                  text_model: str | None = None, device: str = "auto", batch_size: int = 16,
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
+                 on_mismatch: str = "error",
                  on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
@@ -67,7 +68,9 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     `jobs`: worker processes (local) or Ray actors (default: this machine's cores; Ray: the cluster's CPUs);
     `formats`: write each item in these formats from one inference (default: each row's output);
     `force`: redo unchanged items too; `fps`: every item's frame rate (None: the model's); `usd_mode`:
-    "points" or "blendshapes" for every USD target (None: the writer's default, points).
+    "points" or "blendshapes" for every USD target (None: the writer's default, points); `on_mismatch`:
+    "error" refuses a line whose transcript does not match its speech, "warn" writes it and flags it in
+    the reports (each item's "match" holds its score either way: facegen.transcript_match).
     `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
     ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
@@ -80,8 +83,12 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     if ray_address is not None and engine != "ray":
         raise FacegenError("a Ray address applies to the ray engine only", param=("ray_address", "engine"))
     from facegen.animator import check_fps
+    from facegen.transcript_match import ON_MISMATCH
 
     check_fps(fps)
+    if on_mismatch not in ON_MISMATCH:
+        raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
+                           param="on_mismatch")
     if usd_mode not in (None, "points", "blendshapes"):
         raise FacegenError(f"unknown USD mode {usd_mode!r}: use points or blendshapes", param="usd_mode")
     exts = parse_formats(formats)
@@ -90,6 +97,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     all_jobs = read_manifest(manifest, outdir=out, default_ext=default_ext, formats=exts)
     for job in all_jobs:  # workers may run anywhere (Ray): absolute inputs
         job.fps = fps
+        job.on_mismatch = on_mismatch
         job.options = {"mode": usd_mode} if usd_mode else {}
         job.audio = Path(os.path.abspath(job.audio))
         job.alignment = Path(os.path.abspath(job.alignment)) if job.alignment is not None else None

@@ -81,6 +81,7 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
     if on_mismatch not in ON_MISMATCH:
         raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
                            param="on_mismatch")
+    match = None
     try:
         found = ahead.result() if ahead is not None else None
         if found is None:
@@ -90,7 +91,12 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
         if match.problem is not None and on_mismatch == "error":
             raise mismatch(match.problem)
     except FacegenError as exc:
-        raise _foreign(exc, text) from exc
+        refusal = _foreign(exc, text)
+        if match is not None:  # a batch reports the refused line's score
+            refusal.details = {"transcript_match": match.as_dict()}
+        if refusal is exc:
+            raise
+        raise refusal from exc
     if match.problem is not None:
         reporter.note(f"the transcript may not match the speech ({match.problem}; match score "
                       f"{match.score:.2f}): animated with it as asked — check the transcript")

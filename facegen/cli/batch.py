@@ -37,9 +37,12 @@ from facegen.cli.options import DEVICE, FiniteRange
                    "(31 MB).")
 @click.option("--fps", type=FiniteRange(0, 240, min_open=True),
               help="Frames per second of every output (default: the model's, 25).")
+@click.option("--on-mismatch", type=click.Choice(["error", "warn"]), default="error", show_default=True,
+              help="A line whose transcript does not match its speech: an error, or written and flagged in "
+                   "the reports (each item's match score is there either way).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model, text_model, device,
-          batch_size, ext, usd_mode, fps, quiet):
+          batch_size, ext, usd_mode, fps, on_mismatch, quiet):
     """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment,
     speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
     are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed.
@@ -59,6 +62,7 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
         outcome = run_manifest(manifest, output_dir, jobs=jobs, formats=formats, force=force, engine=engine,
                                ray_address=ray_address, model=model, text_model=text_model, device=device,
                                batch_size=batch_size, default_ext=ext, fps=fps, usd_mode=usd_mode,
+                               on_mismatch=on_mismatch,
                                on_plan=planned,
                                on_result=lambda _r: bars and bars[0].update(1))
     finally:
