@@ -70,9 +70,9 @@ $(NODE_STAMP): $(NODE_ASSETS)/package.json
 # Speech synthesisers besides espeak-ng for the voice corpus (facegen/synth/voices.py): Flite (its built-in
 # voices) and Festival with its US English diphone and HTS voices, Debian packages (apt, as root, as the Blender
 # libraries are); the tests skip an engine that is absent. Recorded speech for the tests of short telephone-band
-# lines and scripts (tests/test_scripts.py): ALSA's spoken channel names and Asterisk's English prompt library.
+# lines and scripts (tests/test_scripts.py): ALSA's spoken channel names and Asterisk's English prompt library (the -wav package holds the recordings; asterisk-core-sounds-en links them as sounds/en and holds their script).
 VOICE_PKGS := flite festival festlex-cmu festlex-poslex festvox-kallpc16k festvox-kdlpc16k festvox-us-slt-hts \
-              alsa-utils asterisk-core-sounds-en-wav
+              alsa-utils asterisk-core-sounds-en-wav asterisk-core-sounds-en
 
 voices:
 	@missing=""; \
