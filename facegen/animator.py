@@ -65,6 +65,7 @@ class Clip(NetworkInput):
     idle: bool = False  # silent audio: the neutral face in every frame, without the network
     directions: tuple[str, ...] = ()  # the transcript's stage directions ("(laughs)", "[beep]"): not aligned
     match: Match | None = None  # how well the transcript matches the speech (forced alignment only)
+    confidences: list[float] | None = None  # of each recognised word (recognition only)
 
 
 class Animator:
@@ -240,7 +241,7 @@ class Animator:
                                         ahead=ahead, on_mismatch=on_mismatch)
             from facegen.text import frame_features, text_features
 
-            words = timing.words
+            words = timing.driving  # recognised words the recogniser is unsure of leave the face neutral
             reporter.progress(f"text features ({bundle.text_backend}) for {len(words)} words")
             if early is not None and early[0] == [w.text for w in words]:
                 text_feats = frame_features(words, early[1], T, cfg)
@@ -252,7 +253,7 @@ class Animator:
         reporter.progress(f"inference for {T} frames")
         return Clip(mel, text_feats, spk, timing.phones, audio_name=Path(audio).name, samples=samples,
                     sample_rate=sr, words=timing.words, word_timing=timing.source, mesh=mesh,
-                    match=timing.match)
+                    match=timing.match, confidences=timing.confidences)
 
     # ---------------------------------------------------------------------------------------- the network
 
@@ -332,8 +333,9 @@ class Animator:
                 "model": bundle.path.name if bundle.path else "in-memory",
                 "model_fingerprint": bundle.fingerprint,
                 "speaker": bundle.speakers[clip.speaker],
-                "words": [{"word": w.text, "start": round(w.start, 4), "end": round(w.end, 4)}
-                          for w in clip.words],
+                "words": [{"word": w.text, "start": round(w.start, 4), "end": round(w.end, 4),
+                           **({"confidence": clip.confidences[i]} if clip.confidences else {})}
+                          for i, w in enumerate(clip.words)],
                 "word_timing": clip.word_timing,
                 **({"stage_directions": list(clip.directions)} if clip.directions else {}),
                 **({"transcript_match": clip.match.as_dict()} if clip.match is not None else {}),

@@ -26,12 +26,25 @@ FILE_PHONES_ALIGNED = "alignment file + phones aligned"  # a file's words, (some
 @dataclass
 class Timing:
     """A clip's words in time, where they came from (FORCED, FILE, ...), its phones per frame (models with a
-    phone stream) and, for a forced alignment, how well the transcript matches the speech."""
+    phone stream); for a forced alignment, how well the transcript matches the speech; for recognised words,
+    how sure the recogniser is of each (facegen.recognition)."""
 
     words: list
     source: str
     phones: np.ndarray | None = None
     match: Match | None = None
+    confidences: list[float] | None = None
+
+    @property
+    def driving(self) -> list:
+        """The words that drive the upper face: all of them, but of recognised words only those the
+        recogniser is sure of (recognition.SURE) — a misheard word would move the brows with the wrong
+        meaning; the others leave the face neutral there."""
+        from facegen.recognition import SURE
+
+        if self.confidences is None:
+            return self.words
+        return [w for w, c in zip(self.words, self.confidences, strict=True) if c >= SURE]
 
 
 def force_aligned(text: str | None, alignment, no_text: bool) -> bool:
@@ -63,7 +76,8 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
         return Timing(words, FORCED, match=match)
     reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
                   "transcript; give the transcript or an alignment file for better upper-face motion)")
-    return Timing(recognition.recognize(samples, sr), RECOGNISED)
+    heard = recognition.hear(samples, sr)
+    return Timing(heard.words, RECOGNISED, confidences=heard.confidences)
 
 
 FOREIGN_SHARE = 0.25  # of the words missing from the English dictionary: another language (fr 0.47, es 0.31)
@@ -133,18 +147,19 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     from facegen import align, recognition
 
     # no transcript: the recogniser's words, force-aligned again for their phones
-    recognised = recognition.recognize(samples, sr)
+    heard = recognition.hear(samples, sr)
     try:
-        words, phones = align.align_phones(samples, sr, " ".join(w.text for w in recognised))
+        words, phones = align.align_phones(samples, sr, " ".join(w.text for w in heard.words))
         found = phone_frames(phones, num_frames, fps)
     except FacegenError:
-        words, found = recognised, silence(num_frames)
+        words, found = heard.words, silence(num_frames)
         reporter.note("no phones could be found in the audio without a transcript: the lips follow the audio "
                       "alone (give the transcript for better lip sync)")
     if not no_text:
         reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
                       "a transcript; give the transcript or an alignment file for better lips and brows)")
-        return Timing(words, RECOGNISED, found)
+        same = len(words) == len(heard.words)  # else a word the aligner split: the recogniser's times
+        return Timing(words if same else heard.words, RECOGNISED, found, confidences=heard.confidences)
     return Timing([], NONE, found)
 
 

@@ -106,8 +106,13 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it
-        heard = " ".join(w["word"] for w in anim.metadata["words"]) or "(no words)"
-        reporter.note(f"heard: {heard}")
+        from facegen.recognition import SURE
+
+        words = anim.metadata["words"]
+        unsure = sum(w.get("confidence", 1.0) < SURE for w in words)
+        heard = " ".join(w["word"] + ("?" if w.get("confidence", 1.0) < SURE else "") for w in words)
+        unsure_note = f" ({unsure} unsure words, marked ?, leave the brows neutral)" if unsure else ""
+        reporter.note(f"heard: {heard or '(no words)'}{unsure_note}")
     with Transaction():  # all or nothing: no animation without the preview asked for
         written = plan.write(anim)
         reporter.progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at "
