@@ -85,3 +85,17 @@ voices:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
 	  else echo "voices: install these apt packages as root:$$missing"; fi; \
 	fi
+
+# MediaPipe Face Mesh for the real-face benchmark (benchmarks/real_faces.py), never needed to animate: the
+# mediapipe 0.10.14 wheel ships its face models (later releases download them at run time) and needs
+# protobuf < 5, which the Ray extra of .venv does not allow, so it gets its own venv.
+FACES_VENV  ?= .venv-faces
+FACES_STAMP := $(FACES_VENV)/.installed
+
+.PHONY: faces-venv
+faces-venv: $(FACES_STAMP)
+
+$(FACES_STAMP):
+	$(PYTHON) -m venv $(FACES_VENV)
+	$(FACES_VENV)/bin/pip install -q 'mediapipe==0.10.14'
+	touch $@
