@@ -70,6 +70,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--half", choices=("odd", "even", "all"), default="odd")
     ap.add_argument("--limit", type=int, default=0, help="at most this many lines (0: all)")
     ap.add_argument("--json", type=Path, help="write every case's outcome and scores here")
+    ap.add_argument("--batch", type=Path, metavar="OUT",
+                    help="also run the swapped rows through `facegen batch --on-mismatch warn` into OUT "
+                         "(ARKit .json outputs) and count the lines its report.json flags")
     args = ap.parse_args(argv)
     if not args.script.is_file():
         print(f"{args.script} is missing: apt-get install asterisk-core-sounds-en-wav", file=sys.stderr)
@@ -157,7 +160,41 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nalignment time: {np.median(seconds):.3f} s per second of audio (median of correct lines)")
     if args.json:
         args.json.write_text(json.dumps(cases, indent=1))
+    if args.batch:
+        swapped_in_batch(args.batch, [c for c in cases if c["kind"] == "shuffled"],
+                         {name: wav for name, wav, _ in lines})
     return 0
+
+
+def swapped_in_batch(out: Path, swapped: list[dict], wavs: dict) -> None:
+    """The swapped rows as a batch manifest (each line's recording with another line's script), run with
+    on_mismatch "warn": how many its report flags (written with a warning), refuses (no alignment at all) or
+    passes unflagged, and the match scores of each group."""
+    import csv
+
+    from facegen.batch_run import run_manifest
+
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = out.parent / f"{out.name}-swapped.csv"
+    with open(manifest, "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(["audio", "text", "output"])
+        for k, case in enumerate(swapped):
+            writer.writerow([wavs[case["line"]], case["text"], f"{k:03d}.json"])
+    start = time.perf_counter()
+    outcome = run_manifest(manifest, out, jobs=2, on_mismatch="warn", force=True)
+    items = json.loads(outcome.report_json.read_text())["items"]
+    flagged = [i for i in items if i["flagged"]]
+    refused = [i for i in items if i["status"] == "error"]
+    unflagged = [i for i in items if i["status"] == "passed" and not i["flagged"]]
+    print(f"\nbatch --on-mismatch warn over {len(items)} swapped rows ({time.perf_counter() - start:.0f} s): "
+          f"{len(flagged)} flagged, {len(refused)} refused (no alignment), {len(unflagged)} passed unflagged "
+          f"({(len(flagged) + len(refused)) / max(len(items), 1):.1%} caught)")
+    for name, group in (("flagged", flagged), ("unflagged", unflagged)):
+        scores = [i["match"]["score"] for i in group if i.get("match")]
+        if scores:
+            print(f"  match scores {name}: median {np.median(scores):.2f} "
+                  f"({min(scores):.2f}-{max(scores):.2f})")
 
 
 if __name__ == "__main__":
