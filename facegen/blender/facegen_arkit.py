@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import csv
 import importlib.util
-import json
-import math
+import os
 import re
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -26,24 +26,27 @@ import numpy as np
 ARKIT_EXTENSIONS = (".json", ".csv")
 
 
-def _names():
-    """facegen's arkit/names.py, the one list of ARKit's 52 names and the one name rule, loaded from its file
-    (it needs only `re`): beside this file in the add-on zip (blender/package.py puts it there as
-    arkit_names.py), else from facegen/arkit/ of the tree this file is in."""
+def _load(name: str, shipped: str, tree: str):
+    """A file of facegen that needs only the standard library, loaded from its path: beside this file in the
+    add-on zip (blender/package.py puts it there as `shipped`), else at `tree` in the facegen tree this file
+    is in. facegen's arkit/names.py is the one list of ARKit's 52 names and the one name rule;
+    exchange/arkit_read.py reads ARKit weight files within facegen's bounds, as `facegen validate` does."""
     here = Path(__file__).resolve().parent
-    for path in (here / "arkit_names.py", here.parent / "arkit" / "names.py"):
+    for path in (here / shipped, here.parent / tree):
         if path.is_file():
-            spec = importlib.util.spec_from_file_location("facegen_arkit_names", path)
+            spec = importlib.util.spec_from_file_location(name, path)
             module = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(module)
             return module
-    raise ImportError(f"ARKit's names (arkit_names.py) are missing beside {here}: reinstall the add-on")
+    raise ImportError(f"{shipped} is missing beside {here}: reinstall the add-on")
 
 
-_NAMES = _names()
+_NAMES = _load("facegen_arkit_names", "arkit_names.py", "arkit/names.py")
 ARKIT_NAMES: tuple[str, ...] = _NAMES.ARKIT_NAMES
 arkit_name = _NAMES.arkit_name
-_TIMECODE = re.compile(r"^(\d+):(\d+):(\d+)[:;](\d+)(?:\.(\d+))?$")
+READ = _load("facegen_arkit_read", "arkit_read.py", "exchange/arkit_read.py")
+# HH:MM:SS:FF[.mmm] (";" before FF: drop-frame); at most 9 digits a field, so every sum fits an int64
+_TIMECODE = re.compile(r"^(\d{1,9}):(\d{1,9}):(\d{1,9})[:;](\d{1,9})(?:\.(\d{1,9}))?$")
 
 
 # ---- reading (numpy only) ----------------------------------------------------------------------------------
@@ -51,24 +54,62 @@ _TIMECODE = re.compile(r"^(\d+):(\d+):(\d+)[:;](\d+)(?:\.(\d+))?$")
 
 def read_weights(path: str | Path, fps: float | None = None) -> dict:
     """ARKit weights from an Audio2Face JSON or a Live Link Face CSV: {"names": ARKit names of the columns,
-    "weights": [T, N] float64, "frames": [T] key positions (frames from 0), "fps",
+    "weights": [T, N] float32, "frames": [T] key positions (frames from 0), "fps",
     "audio": the WAV the file names or the one beside it (same stem), or None}. `fps` overrides the file's.
-    Raises ValueError (one line) when the file is not ARKit-shaped."""
+    Raises ValueError (one line) when the file is not ARKit-shaped, is not a regular file (a FIFO, a device:
+    refused at once, not waited on), or is past facegen's bounds (arkit_read.py: 4 hours, 512 MB; read in
+    bounded memory, most refusals before the rows are read)."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix == ".json":
-        clip = _read_json(path, fps)
-    elif suffix == ".csv":
-        clip = _read_csv(path, fps)
-    else:
+    if suffix not in ARKIT_EXTENSIONS:
         raise ValueError(f"{path.name}: ARKit weights are read from .json (Audio2Face) or .csv (Live Link "
                          "Face)")
+    check_fps(fps)
+    try:
+        with open_regular(path) as file:
+            clip = _read_json(path, file, fps) if suffix == ".json" else _read_csv(path, file, fps)
+    except READ.TooLarge as exc:
+        raise ValueError(f"{path.name}: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path.name}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise ValueError(f"{path.name}: cannot read it ({exc.strerror or exc})") from None
+    if clip["fps"] > READ.MAX_FPS:
+        raise ValueError(f"{path.name}: {clip['fps']:g} frames per second, more than facegen plays "
+                         f"({READ.MAX_FPS:g}): pass --fps")
     if not np.isfinite(clip["weights"]).all():
         raise ValueError(f"{path.name}: the weights hold NaN or infinite values")
     audio = clip.pop("audio_name", None)
     wav = path.parent / audio if isinstance(audio, str) and audio else path.with_suffix(".wav")
     clip["audio"] = str(wav) if wav.is_file() else None
     return clip
+
+
+def check_fps(fps) -> None:
+    """Refuse a frame rate (None: the file's) that is not a number in (0, MAX_FPS], as facegen does."""
+    rate = READ.rate_of(fps) if fps is not None else READ.MAX_FPS
+    if rate is None or rate > READ.MAX_FPS:
+        raise ValueError(f"the frame rate must be a number of frames per second in (0, {READ.MAX_FPS:g}], "
+                         f"got {fps!r}")
+
+
+def open_regular(path: Path):
+    """`path` open for reading in binary when it is a regular file; a FIFO, a device, a folder is a
+    ValueError at once (stat, then opened without blocking and checked again), as facegen's
+    input_files.open_input refuses them."""
+    try:
+        mode = os.stat(path).st_mode
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)) if (
+            stat.S_ISREG(mode)) else None
+    except ValueError:
+        raise ValueError(f"{path!r}: the path contains a NUL byte") from None
+    if fd is not None and not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        fd = None
+    if fd is None:
+        raise ValueError(f"{path}: not a regular file (a folder, a FIFO or a device): pass an ARKit weight "
+                         "file")
+    return os.fdopen(fd, "rb")
 
 
 def _columns(path: Path, names: list[str]) -> tuple[list[str], list[int]]:
@@ -82,67 +123,112 @@ def _columns(path: Path, names: list[str]) -> tuple[list[str], list[int]]:
     return [n for n, _ in found], [i for _, i in found]
 
 
-def _read_json(path: Path, fps: float | None) -> dict:
+class _Table:
+    """Rows of numbers gathered a block at a time as float32 (what Blender keys), never as Python floats:
+    `add` raises ValueError (one line, said with `what`) for a row that is no list of numbers."""
+
+    def __init__(self, what: str) -> None:
+        self.what, self.blocks, self.count = what, [], 0
+
+    def add(self, rows: list) -> None:
+        for i, row in enumerate(rows, self.count):
+            if type(row) is not list or not set(map(type, row)) <= {float, int}:
+                bad = row if type(row) is not list else next(v for v in row if type(v) not in (float, int))
+                raise ValueError(f"{self.what} row {i} holds {READ.short(bad)}, not a number")
+        try:
+            block = np.array(rows, np.float64)
+        except OverflowError:  # an integer of hundreds of digits
+            raise ValueError(f"{self.what} holds a number past float range") from None
+        except ValueError:
+            raise ValueError(f"{self.what}: its rows hold different numbers of weights") from None
+        with np.errstate(over="ignore"):  # past float32: inf, refused as such
+            self.blocks.append(block.astype(np.float32))
+        self.count += len(rows)
+
+    def array(self, width: int) -> np.ndarray:
+        return np.concatenate(self.blocks) if self.blocks else np.zeros((0, width), np.float32)
+
+
+def _read_json(path: Path, file, fps: float | None) -> dict:
     shape = (f"{path.name}: not an Audio2Face blend-shape JSON "
              "(exportFps, facsNames, weightMat [frames][shapes])")
+    table = _Table("weightMat")
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        doc, count = READ.read_json(file, table.add, fps)
+    except READ.NotJson as exc:
         raise ValueError(f"{shape}: {exc}") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("facsNames"), list) or "weightMat" not in doc:
+    except ValueError as exc:
+        if isinstance(exc, READ.TooLarge | UnicodeDecodeError):
+            raise
+        raise ValueError(f"{shape}: {exc}") from None
+    if not isinstance(doc.get("facsNames"), list) or count is None:
         raise ValueError(shape)
     names = doc["facsNames"]
     if not all(isinstance(n, str) for n in names):
         raise ValueError(f"{shape}: facsNames must be strings")
-    try:
-        weights = np.asarray(doc["weightMat"], dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{shape}: weightMat is not a table of numbers") from None
-    if weights.ndim != 2 or weights.shape[1] != len(names) or not len(weights):
+    weights = table.array(len(names))
+    if weights.shape[1] != len(names) or not len(weights):
         raise ValueError(f"{shape}: weightMat is {list(weights.shape)}, expected [frames, {len(names)}]")
     if doc.get("numFrames") is not None and doc["numFrames"] != len(weights):
-        raise ValueError(f"{shape}: numFrames is {doc['numFrames']} but weightMat has {len(weights)} rows")
-    rate = fps or doc.get("exportFps")
-    if not isinstance(rate, int | float) or isinstance(rate, bool) or not rate > 0 or not math.isfinite(rate):
+        raise ValueError(f"{shape}: numFrames is {READ.short(doc['numFrames'])} but weightMat has "
+                         f"{len(weights)} rows")
+    rate = fps or READ.rate_of(doc.get("exportFps"))
+    if rate is None:
         raise ValueError(f"{shape}: exportFps must be a positive number (or pass --fps)")
     ark, columns = _columns(path, names)
     extra = doc.get("facegen")
     audio = extra.get("audio") if isinstance(extra, dict) else None
-    return {"names": ark, "weights": weights[:, columns], "frames": np.arange(len(weights), dtype=np.float64),
+    weights = weights if columns == list(range(len(names))) else weights[:, columns]  # no copy when all are
+    return {"names": ark, "weights": weights, "frames": np.arange(len(weights), dtype=np.float64),
             "fps": float(rate), "audio_name": audio}
 
 
-def _read_csv(path: Path, fps: float | None) -> dict:
+def _read_csv(path: Path, file, fps: float | None) -> dict:
     shape = f"{path.name}: not a Live Link Face CSV (Timecode,BlendShapeCount,EyeBlinkLeft,...)"
+    rows = (r for r in READ.csv_rows(file) if r)
     try:
-        with path.open(newline="", encoding="utf-8-sig") as file:
-            rows = [r for r in csv.reader(file) if r]
-    except (UnicodeDecodeError, csv.Error) as exc:
+        header = [h.strip() for h in next(rows, [])]
+        if [h.lower() for h in header[:2]] != ["timecode", "blendshapecount"]:
+            raise ValueError(shape)
+        ark, columns = _columns(path, header[2:])
+        columns = [c + 2 for c in columns]
+        table, stamps, block, first = _Table("the CSV"), [], [], None
+        for number, row in enumerate(rows, start=2):
+            found = _TIMECODE.match(row[0].strip())
+            if found is None or len(row) < len(header):
+                raise ValueError(f"{shape}: row {number} has {len(row)} of {len(header)} columns or a "
+                                 f"Timecode {READ.short(row[0])} that is not HH:MM:SS:FF.mmm")
+            stamp = [int(found.group(i)) for i in range(1, 5)]
+            stamp.append(int((found.group(5) or "0")[:3].ljust(3, "0")))
+            seconds = (stamp[0] * 60 + stamp[1]) * 60 + stamp[2]
+            first = seconds if first is None else first
+            READ.check_span(abs(seconds - first))
+            READ.check_frames(number - 1, None, more=True)
+            stamps.append(stamp)
+            try:
+                block.append([float(row[c]) for c in columns])
+            except ValueError as exc:
+                raise ValueError(f"{shape}: row {number}: {exc}") from None
+            if len(block) == READ.BLOCK:
+                table.add(block)
+                block = []
+    except csv.Error as exc:
         raise ValueError(f"{shape}: {exc}") from None
-    if len(rows) < 2 or [h.strip().lower() for h in rows[0][:2]] != ["timecode", "blendshapecount"]:
+    table.add(block)
+    if not stamps:
         raise ValueError(shape)
-    header = [h.strip() for h in rows[0]]
-    ark, columns = _columns(path, header[2:])
-    columns = [c + 2 for c in columns]
-    stamps = []
-    for number, row in enumerate(rows[1:], start=2):
-        found = _TIMECODE.match(row[0].strip())
-        if found is None or len(row) < len(header):
-            raise ValueError(f"{shape}: row {number} has {len(row)} of {len(header)} columns or a Timecode "
-                             f"{row[0]!r} that is not HH:MM:SS:FF.mmm")
-        stamps.append([int(found.group(i)) for i in range(1, 5)]
-                      + [int((found.group(5) or "0")[:3].ljust(3, "0"))])
-    try:
-        weights = np.array([[float(row[c]) for c in columns] for row in rows[1:]], dtype=np.float64)
-    except ValueError as exc:
-        raise ValueError(f"{shape}: {exc}") from None
+    weights = table.array(len(columns))
     stamps = np.array(stamps, dtype=np.int64)
     seconds = (stamps[:, 0] * 60 + stamps[:, 1]) * 60 + stamps[:, 2]
+    seconds -= seconds.min()  # within 4 hours (check_span): the products below stay far inside int64
     if fps is None:
         if len(np.unique(seconds)) < 2:
             raise ValueError(f"{path.name}: its Timecodes stay within one second, which does not tell the "
                              "frame rate: pass --fps")
         fps = float(stamps[:, 3].max() + 1)
+        if fps > READ.MAX_FPS:
+            raise ValueError(f"{path.name}: its Timecodes count {fps:.0f} frames in a second, more than "
+                             f"facegen plays ({READ.MAX_FPS:g}): pass --fps")
     whole = seconds * round(fps) + stamps[:, 3]
     # ".mmm" is a sub-frame: only used when rows share a whole frame (e.g. 60 Hz rows on a 30 fps timecode)
     frames = whole + stamps[:, 4] / 1000.0 if len(np.unique(whole)) < len(whole) else whole.astype(np.float64)

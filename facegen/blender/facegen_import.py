@@ -21,7 +21,8 @@ Three ways to use it:
     import facegen_import; facegen_import.import_file("out.usdc")      # inside Blender's Python / bpy
     the add-on (this folder, zipped as facegen_blender, see docs/dcc.md): File > Import > facegen animation
 
-This file imports nothing from facegen (Blender's Python does not have it installed).
+This file imports nothing from facegen (Blender's Python does not have it installed). Every refusal is one
+line: a ValueError/OSError/RuntimeError from the functions, exit 2 on the command line, nothing saved.
 """
 
 from __future__ import annotations
@@ -222,15 +223,8 @@ def scene_fps(scene) -> float:
     return scene.render.fps / scene.render.fps_base
 
 
-def import_file(
-    path: str | os.PathLike,
-    *,
-    fps: float | None = None,
-    audio: str | os.PathLike | None = None,
-    sound: bool = True,
-    scene=None,
-    target=None,
-) -> dict:
+def import_file(path: str | os.PathLike, *, fps: float | None = None, audio: str | os.PathLike | None = None,
+                sound: bool = True, scene=None, target=None) -> dict:
     """Import a facegen animation into `scene` (default: the current one) and set it up for playback.
 
     A .glb/.gltf/.usd* file is imported with Blender's importer. A .json (Audio2Face) or .csv (Live Link
@@ -241,18 +235,37 @@ def import_file(
     file), warnings; for glTF/USD also mesh; for ARKit weights also matched, unmatched (ARKit shapes no
     shape key stands for), keys. Raises ValueError/OSError/RuntimeError with a one-line message.
     """
-    import bpy
+    return _import(read_file(path, fps, target, audio), sound=sound, scene=scene, target=target)
 
+
+def read_file(path: str | os.PathLike, fps: float | None = None, target=None,
+              audio: str | os.PathLike | None = None) -> dict:
+    """What import_file reads before Blender is touched (no bpy): the path and `audio` (regular files), the
+    frame rate (in (0, 240], as facegen's), an ARKit file's weights (within facegen's bounds: read_weights).
+    The command line calls it before it imports bpy: a refusal costs no Blender start (2 s, 270 MB)."""
     path = Path(path).resolve()
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist")
-    scene = scene or bpy.context.scene
     arkit = _sibling("facegen_arkit")
+    arkit.check_fps(fps)
+    for given in (path, audio):  # missing, a FIFO, a device, a folder: one line now, not a hang later
+        if given is not None:
+            arkit.open_regular(Path(given)).close()
+    clip = None
     if path.suffix.lower() in arkit.ARKIT_EXTENSIONS:
-        done, info = _apply_weights(arkit, path, target, fps, scene)
+        clip = arkit.read_weights(path, fps)
     elif target:
         raise ValueError(f"{path.name}: a target applies ARKit weights (.json, .csv); import {path.suffix} "
                          "files without one")
+    return {"path": path, "fps": fps, "audio": audio, "clip": clip, "arkit": arkit}
+
+
+def _import(read: dict, *, sound: bool, scene, target) -> dict:
+    """import_file after read_file."""
+    import bpy
+
+    path, fps, audio = read["path"], read["fps"], read["audio"]
+    scene = scene or bpy.context.scene
+    if read["clip"] is not None:
+        done, info = _apply_weights(read["arkit"], path, read["clip"], target, scene)
     else:
         done, info = _import_animation(path, fps, scene)
     scene.frame_start = 0
@@ -295,6 +308,8 @@ def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]
 
     info = file_info(path)
     rate = float(fps or info["fps"] or scene_fps(scene))
+    if not 0 < rate < math.inf:
+        raise ValueError(f"{path.name}: its frame rate is {rate:g}: pass --fps")
     before = set(bpy.data.objects)
     if info["format"] == "gltf":
         # the importer turns seconds into frames with render.fps * render.fps_base: make that the rate
@@ -320,11 +335,11 @@ def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]
     return done, info
 
 
-def _apply_weights(arkit, path: Path, target, fps: float | None, scene) -> tuple[dict, dict]:
-    """Key an ARKit JSON/CSV onto the target objects' shape keys at its rate; (what was done, audio info)."""
+def _apply_weights(arkit, path: Path, clip: dict, target, scene) -> tuple[dict, dict]:
+    """Key an ARKit JSON/CSV's weights (read_weights) onto the target objects' shape keys at its rate; (what
+    was done, audio info)."""
     import bpy
 
-    clip = arkit.read_weights(path, fps)
     if target is None:
         objects = [o for o in scene.objects if arkit.arkit_keys(o)]
         if not objects:
@@ -415,10 +430,32 @@ def remove_sound(scene) -> None:
 # ---- command line (blender --python facegen_import.py -- FILE ...) ----------------------------------------
 
 
+def _fail(problem) -> None:
+    """One line on stderr, exit 2: nothing has been saved."""
+    print(f"facegen_import: error: {' '.join(str(problem).split())}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def check_save(path: str | os.PathLike) -> Path:
+    """The .blend file to save, checked before any work: not a folder, in a folder that exists and can be
+    written into (Blender would refuse it only after the import, with a traceback)."""
+    target = Path(path).resolve()
+    if target.is_dir():
+        raise ValueError(f"cannot save to {path}: it is a folder: pass a .blend file name")
+    if target.exists() and not target.is_file():
+        raise ValueError(f"cannot save to {path}: it is not a regular file: pass a .blend file name")
+    if not target.parent.is_dir():
+        raise ValueError(f"cannot save to {path}: the folder {target.parent} does not exist: create it first")
+    if not os.access(target.parent, os.W_OK | os.X_OK):
+        raise ValueError(f"cannot save to {path}: the folder {target.parent} is not writable")
+    return target
+
+
 def main(argv: list[str] | None = None) -> dict:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     parser = argparse.ArgumentParser(prog="facegen_import", description=__doc__.splitlines()[0])
+    parser.error = lambda message: _fail(f"{message} (see --help)")  # one line, exit 2, as every refusal
     parser.add_argument("file", help="a facegen .glb/.gltf/.usd/.usda/.usdc/.usdz file, or ARKit weights "
                         "(.json Audio2Face, .csv Live Link Face)")
     parser.add_argument("--target", action="append", metavar="OBJECT",
@@ -430,22 +467,29 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--empty", action="store_true", help="start from an empty scene")
     parser.add_argument("--save", help="save the scene as this .blend file")
     args = parser.parse_args(argv)
+    try:  # everything that can be refused without Blender, before bpy starts (2 s, 270 MB)
+        save = check_save(args.save) if args.save else None
+        read = read_file(args.file, args.fps, args.target, args.audio)
+    except (OSError, ValueError) as exc:
+        _fail(exc)
     import bpy
 
     if args.empty:
         bpy.ops.wm.read_factory_settings(use_empty=True)
     try:
-        done = import_file(args.file, fps=args.fps, audio=args.audio, sound=not args.no_sound,
-                           target=args.target)
+        done = _import(read, sound=not args.no_sound, scene=None, target=args.target)
     except (OSError, RuntimeError, ValueError) as exc:
-        raise SystemExit(f"facegen_import: error: {exc}") from None
+        _fail(exc)
     for line in done["warnings"]:
         print(f"facegen_import: warning: {line}")
     if done.get("unmatched"):
         print(f"facegen_import: no shape key for {len(done['unmatched'])} ARKit shapes: "
               f"{', '.join(done['unmatched'])}")
-    if args.save:
-        bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.save).resolve()))
+    if save is not None:
+        try:
+            bpy.ops.wm.save_as_mainfile(filepath=str(save))
+        except RuntimeError as exc:
+            _fail(f"cannot save {save}: {exc}")
     print("facegen_import: " + json.dumps(done))
     return done
 

@@ -24,8 +24,10 @@ def write_addon(path: str | os.PathLike = f"{ADDON_MODULE}.zip") -> Path:
     with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for name in ADDON_FILES:
             archive.write(folder / name, f"{ADDON_MODULE}/{name}")
-        # facegen_arkit.py loads ARKit's names from this file: Blender's Python has no facegen to import
+        # facegen_arkit.py loads ARKit's names and facegen's bounded reader of ARKit files from these files:
+        # Blender's Python has no facegen to import
         archive.write(folder.parent / "arkit" / "names.py", f"{ADDON_MODULE}/arkit_names.py")
+        archive.write(folder.parent / "exchange" / "arkit_read.py", f"{ADDON_MODULE}/arkit_read.py")
     return path
 
 

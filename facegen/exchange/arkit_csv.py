@@ -25,7 +25,7 @@ from facegen.arkit.names import LIVE_LINK_COLUMNS, LIVE_LINK_ROTATIONS, arkit_na
 from facegen.arkit.solve import Fit
 from facegen.exchange.arkit_json import write_fitted
 
-TIMECODE = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,})(?:\.(\d+))?$")
+TIMECODE = re.compile(r"^(\d{2,3}):(\d{2}):(\d{2}):(\d{2,3})(?:\.(\d{1,9}))?$")  # bounded: no 10**400
 
 
 def timecode(frame: int, fps: float) -> str:

@@ -6,7 +6,8 @@
   finite          no NaN or infinite coordinate
   displacement    no vertex moves further than `max_displacement` x the rest pose's bounding-box diagonal
                   from its rest position (rest = template, else the file's rest pose, else frame 0)
-  audio           the audio is attached and readable
+  audio           the audio is attached and readable (a regular file: a FIFO or a device named by a file is
+                  refused, not waited on or read forever), within audio.load_audio's bounds
   audio duration  the frame count matches the audio's duration x fps within one frame
 """
 
@@ -19,9 +20,10 @@ from typing import TypeVar
 
 import numpy as np
 
-from facegen.audio import load_audio
+from facegen.audio import MAX_SAMPLE_RATE, MAX_SECONDS, MIN_SAMPLE_RATE
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
+from facegen.input_files import open_input
 from facegen.validate.report import Report
 
 Opened = TypeVar("Opened")
@@ -123,31 +125,80 @@ class ValueScan:
         )
 
 
+def shown(path: str | os.PathLike) -> str:
+    """A path as a report line shows it: one line, whatever a file said it was."""
+    text = str(path)
+    return text if text.isprintable() else repr(text)
+
+
+def audio_length(path: str | os.PathLike) -> tuple[int, int]:
+    """(samples, rate) of the audio file at `path`, for the checks that need its duration and that it
+    decodes, without keeping the samples (audio.load_audio keeps them for the animation: a 2-hour sidecar
+    would be 1.4 GB of floats). Integer PCM (most WAVs) holds exactly the samples its header counts
+    (libsndfile clamps the count to the file's size): one block is read, not 1.4 GB from the disk; other
+    encodings (MP3, OGG, FLAC, float WAVs, which may hold NaN) are decoded block by block and counted. The
+    same bounds as load_audio (sample rate, 4 hours); a FIFO, a device or a folder is refused at once
+    (input_files.open_input). Anything unreadable is a FacegenError of one line."""
+    import soundfile as sf
+
+    name, fix = shown(path), "pass a WAV, FLAC, OGG or MP3 file"
+    try:
+        with open_input(path) as handle, sf.SoundFile(handle) as f:
+            rate = int(f.samplerate)
+            if not MIN_SAMPLE_RATE <= rate <= MAX_SAMPLE_RATE:
+                raise FacegenError(f"{name} says its sample rate is {rate} Hz; speech audio has "
+                                   f"{MIN_SAMPLE_RATE}-{MAX_SAMPLE_RATE} Hz: re-export it")
+            if f.frames > MAX_SECONDS * rate:
+                raise FacegenError(f"{name} is {f.frames / rate / 3600:.1f} hours long; facegen animates up "
+                                   f"to {MAX_SECONDS // 3600} hours: cut it into parts")
+            whole = f.subtype.startswith("PCM_") or f.subtype in ("ULAW", "ALAW")
+            floats = f.subtype in ("FLOAT", "DOUBLE")  # the only ones that can hold NaN
+            block, count = max(1, (1 << 22) // max(1, f.channels)), 0
+            while len(samples := f.read(block, dtype="float32" if floats else "int16")):
+                count += len(samples)
+                if floats and not np.isfinite(samples).all():
+                    raise FacegenError(f"audio {name} contains NaN or infinite samples: re-export it")
+                if count > MAX_SECONDS * rate:  # longer than its header said
+                    raise FacegenError(f"{name} is longer than {MAX_SECONDS // 3600} hours, facegen animates "
+                                       f"up to {MAX_SECONDS // 3600} hours: cut it into parts")
+                if whole:
+                    return max(count, f.frames), rate
+    except sf.LibsndfileError as exc:
+        raise FacegenError(f"cannot read {name} as audio ({exc.error_string}): {fix}") from exc
+    except OSError as exc:  # open_input: missing, a FIFO, a device, a folder; a read error
+        raise FacegenError(f"cannot read audio {name} ({exc.strerror or exc}): {fix}") from exc
+    except (RuntimeError, TypeError) as exc:
+        raise FacegenError(f"cannot read {name} as audio ({exc}): {fix}") from exc
+    return count, rate
+
+
 def read_audio(
     report: Report, name: str, path: str | os.PathLike, shown: str,
-    reader: Callable[[str | os.PathLike], tuple[np.ndarray, int]] = load_audio,
-) -> tuple[np.ndarray, int] | None:
-    """The check `name`: the audio at `path` (read with `reader`) decodes and is not empty."""
+    reader: Callable[[str | os.PathLike], tuple[np.ndarray | int, int]] = audio_length,
+) -> tuple[int, int] | None:
+    """The check `name`: the audio at `path` (read with `reader`: its samples or their number, and the rate)
+    decodes and is not empty; returns (number of samples, rate)."""
     try:
         samples, rate = reader(path)
     except FacegenError as exc:
         report.add(name, False, f"{shown}: {exc}")
         return None
-    if len(samples) == 0:
+    count = samples if isinstance(samples, int) else len(samples)
+    if count == 0:
         report.add(name, False, f"{shown}: no audio samples")
         return None
-    report.add(name, True, f"{shown}: {len(samples) / rate:.3f} s at {rate} Hz")
-    return samples, rate
+    report.add(name, True, f"{shown}: {count / rate:.3f} s at {rate} Hz")
+    return count, rate
 
 
 def check_duration(
-    report: Report, frames: int, fps: float, audio: tuple[np.ndarray, int] | None, require_audio: bool
+    report: Report, frames: int, fps: float, audio: tuple[int, int] | None, require_audio: bool
 ) -> None:
     if audio is None:
         if require_audio:
             report.add("audio duration", False, "no readable audio to compare the frame count with")
         return
-    seconds = len(audio[0]) / audio[1]
+    seconds = audio[0] / audio[1]
     expected = seconds * fps
     ok = abs(frames - expected) <= 1.0
     report.add(

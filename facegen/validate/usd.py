@@ -46,6 +46,7 @@ from facegen.exchange import usd_skel
 from facegen.exchange import usdz as usdz_format
 from facegen.validate.checks import (
     ValueScan,
+    audio_length,
     check_duration,
     check_faces,
     check_values,
@@ -151,13 +152,17 @@ def check(report: Report, path: Path, expected: Expected) -> None:
         if not resolved:
             report.add("audio", False, f"{sound.GetPath()} refers to {asset!r}, which does not resolve")
         else:
-            audio = read_audio(
-                report, "audio", resolved, f"{sound.GetPath()} -> {asset}", usd_format.read_audio_asset
-            )
+            audio = read_audio(report, "audio", resolved, f"{sound.GetPath()} -> {asset}", _audio_asset)
     if expected.audio_path is not None:
         audio = read_audio(report, "audio file", expected.audio_path, str(expected.audio_path))
     check_duration(report, len(frames), rate, audio, expected.require_audio)
     _usd_validators(report, stage)
+
+
+def _audio_asset(resolved: str) -> tuple[np.ndarray | int, int]:
+    """The audio a SpatialAudio prim resolves to: a file measured in bounded memory (audio_length), one
+    inside a .usdz package read through USD's resolver."""
+    return (audio_length if os.path.isfile(resolved) else usd_format.read_audio_asset)(resolved)
 
 
 def _blendshape_frames(report: Report, stage, mesh, rest) -> tuple[list[float], np.ndarray | list]:
