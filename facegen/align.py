@@ -44,7 +44,7 @@ from facegen.sphinx import (
     pcm16k,
     pcm_bytes,
 )
-from facegen.transcript_match import Match, judge, mismatch, speech_snr_db
+from facegen.transcript_match import UNALIGNED, Match, judge, mismatch, speech_snr_db
 from facegen.words import Word, check_word_rate, no_words, normalize_transcript, spelled
 
 Phone = tuple[str, float, float]  # (CMU phone without stress, start s, end s)
@@ -154,7 +154,7 @@ def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_pho
                                  n_frames - origin, cmn, prefix=not last)
             if found is None or len(found[1]) <= back:
                 if last:
-                    raise mismatch("no alignment of its words to the audio exists")
+                    raise mismatch(UNALIGNED)
                 chosen = {i for i in chosen if i < p} | ({p} if any(i >= p for i in chosen) else set())
                 # a piece whose words cannot be told apart: align the rest at once
                 spans[p:] = [(start, n_frames)]
@@ -176,7 +176,7 @@ def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_pho
             words += [(w, a + origin, b + origin) for w, a, b in kept]
             start, p = end, p + 1
     if len(words) < len(spoken):
-        raise mismatch("no alignment of its words to the audio exists")
+        raise mismatch(UNALIGNED)
     # the outer edges from the audio (align_pieces.speech_edges); a word whose edge moves is scored over its
     # new bounds as the search placed them (the frames it gave to silence fit worse), and its phones come from
     # aligning it again inside them

@@ -106,6 +106,19 @@ class Match:
                 "word_gap_bound": round(self.gap_bound, 2), "problem": self.problem}
 
 
+UNALIGNED = "no alignment of its words to the audio exists"
+
+
+def unaligned() -> Match:
+    """The Match of a transcript whose words cannot be placed in the speech at all (score 0)."""
+    return Match(1.0, float("nan"), CLEAN_WORD_GAP, UNALIGNED)
+
+
+def is_mismatch(exc: Exception) -> bool:
+    """Whether `exc` is the refusal of a transcript that does not match its speech (`mismatch`)."""
+    return isinstance(exc, FacegenError) and str(exc).startswith("the transcript does not match the speech")
+
+
 def mismatch(detail: str) -> FacegenError:
     """The refusal of a transcript that does not match the speech."""
     return FacegenError(f"the transcript does not match the speech ({detail}): check the transcript",

@@ -72,7 +72,12 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
     if text is not None:
         _check_transcript(text)
         reporter.progress("aligning the transcript to the speech (pocketsphinx)")
-        words, _, match = forced(samples, sr, text, ahead, False, on_mismatch, reporter)
+        try:
+            words, _, match = forced(samples, sr, text, ahead, False, on_mismatch, reporter)
+        except FacegenError as exc:
+            unaligned = _unaligned(exc, on_mismatch, reporter)
+            heard = recognition.hear(samples, sr)
+            return Timing(heard.words, RECOGNISED, match=unaligned, confidences=heard.confidences)
         return Timing(words, FORCED, match=match)
     reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
                   "transcript; give the transcript or an alignment file for better upper-face motion)")
@@ -90,7 +95,7 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
     A transcript that does not match the speech is refused (`on_mismatch` "error") or animated with a
     warning ("warn"); one whose words cannot be placed at all is always refused."""
     from facegen import align
-    from facegen.transcript_match import ON_MISMATCH, mismatch
+    from facegen.transcript_match import ON_MISMATCH, is_mismatch, mismatch, unaligned
 
     if on_mismatch not in ON_MISMATCH:
         raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
@@ -106,6 +111,8 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
             raise mismatch(match.problem)
     except FacegenError as exc:
         refusal = _foreign(exc, text)
+        if match is None and is_mismatch(exc):  # no alignment at all
+            match = unaligned()
         if match is not None:  # a batch reports the refused line's score
             refusal.details = {"transcript_match": match.as_dict()}
         if refusal is exc:
@@ -120,8 +127,9 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
 def _foreign(exc: FacegenError, text: str) -> FacegenError:
     """A mismatch refusal, with a hint when many of the words are not English (FOREIGN_SHARE)."""
     from facegen import sphinx
+    from facegen.transcript_match import is_mismatch
 
-    if str(exc).startswith("the transcript does not match") and sphinx.unknown_share(text) > FOREIGN_SHARE:
+    if is_mismatch(exc) and sphinx.unknown_share(text) > FOREIGN_SHARE:
         return FacegenError(f"{exc}; many of its words are not English: the aligner knows English only, so "
                             "align speech in another language with a tool for that language and pass its "
                             "word timings", param=("text", "alignment"))
@@ -135,18 +143,46 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     transcript; the words of an alignment file with its phones, or, where it has none, the phones aligned
     inside its word times (`alignment_phones`); or without a transcript (also with --no-text, which only drops
     the text features) the phone alignment of the recognised words."""
-    from facegen.phonetics import phone_frames, silence
+    from facegen.phonetics import phone_frames
 
     if alignment is not None:
         words, phones, source = alignment_phones(samples, sr, alignment, reporter)
         return Timing(words, source, phone_frames(phones, num_frames, fps))
     if text is not None and not no_text:
         _check_transcript(text)
-        words, phones, match = forced(samples, sr, text, ahead, True, on_mismatch, reporter)
+        try:
+            words, phones, match = forced(samples, sr, text, ahead, True, on_mismatch, reporter)
+        except FacegenError as exc:
+            unaligned = _unaligned(exc, on_mismatch, reporter)
+            timing = _heard_with_phones(samples, sr, num_frames, fps, no_text, reporter)
+            timing.match = unaligned
+            return timing
         return Timing(words, FORCED, phone_frames(phones, num_frames, fps), match)
-    from facegen import align, recognition
+    if not no_text:
+        reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
+                      "a transcript; give the transcript or an alignment file for better lips and brows)")
+    return _heard_with_phones(samples, sr, num_frames, fps, no_text, reporter)
 
-    # no transcript: the recogniser's words, force-aligned again for their phones
+
+def _unaligned(exc: FacegenError, on_mismatch: str, reporter: Reporter) -> Match:
+    """A transcript whose words cannot be placed in the speech at all: refused (re-raised) unless
+    `on_mismatch` is "warn", where the clip is animated from the recognised words instead, with a note, and
+    this Match (score 0) flags it."""
+    from facegen.transcript_match import UNALIGNED, is_mismatch, unaligned
+
+    if on_mismatch != "warn" or not is_mismatch(exc):
+        raise exc
+    reporter.note(f"the transcript does not match the speech ({UNALIGNED}): animated from the words "
+                  "recognised in the audio as asked — check the transcript")
+    return unaligned()
+
+
+def _heard_with_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, no_text: bool,
+                       reporter: Reporter) -> Timing:
+    """Without a transcript: the recogniser's words, force-aligned again for their phones."""
+    from facegen import align, recognition
+    from facegen.phonetics import phone_frames, silence
+
     heard = recognition.hear(samples, sr)
     try:
         words, phones = align.align_phones(samples, sr, " ".join(w.text for w in heard.words))
@@ -156,8 +192,6 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
         reporter.note("no phones could be found in the audio without a transcript: the lips follow the audio "
                       "alone (give the transcript for better lip sync)")
     if not no_text:
-        reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
-                      "a transcript; give the transcript or an alignment file for better lips and brows)")
         same = len(words) == len(heard.words)  # else a word the aligner split: the recogniser's times
         return Timing(words if same else heard.words, RECOGNISED, found, confidences=heard.confidences)
     return Timing([], NONE, found)

@@ -115,3 +115,21 @@ def test_batch_reports_every_lines_score_and_flags_the_mismatches_it_wrote(tmp_p
               if p.get("name") == "match_score"]
     assert scores == [whole["match"]["score"], half["match"]["score"]]
     assert all(not math.isnan(s) for s in scores)
+
+
+def test_a_transcript_that_cannot_be_aligned_is_refused_or_animated_from_the_recognised_words():
+    """Another line's script whose words cannot be placed at all: refused with score 0, or (warn) animated
+    from the words recognised in the audio, flagged with score 0."""
+    import facegen
+
+    wrong = "Seven purple elephants were dancing slowly across the frozen river."
+    with pytest.raises(FacegenError, match="no alignment of its words") as refused:
+        facegen.animate(WAV, text=wrong)
+    assert refused.value.details["transcript_match"]["score"] == 0.0
+    notes: list[str] = []
+    anim = facegen.animate(WAV, text=wrong, on_mismatch="warn", reporter=facegen.Reporter(note=notes.append))
+    match = anim.metadata["transcript_match"]
+    assert match["score"] == 0.0 and match["problem"] == "no alignment of its words to the audio exists"
+    assert anim.metadata["word_timing"] == "speech recognition" and anim.metadata["words"]
+    assert all("confidence" in w for w in anim.metadata["words"])
+    assert any("animated from the words recognised" in n for n in notes)

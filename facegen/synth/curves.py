@@ -51,6 +51,7 @@ def _v(**kw: float) -> np.ndarray:
 # targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme (a phone's visemes: facegen.phonetics)
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
+    "inhale": (_v(), 1.0, 1.0),  # the lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
     "PBM": (_v(jaw_open=0.04, lip_close=1.0), 1.5, 2.5),
     "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 1.5, 3.0),
     "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.5, 0.8),
@@ -77,6 +78,13 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
 }
 
 VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
+ANTICIPATION_S = 0.07  # s, time constant of a segment's dominance before it (coarticulation ahead)
+CARRYOVER_S = 0.045  # s, after it
+CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.03, 0.06  # s, the lips' and the jaw's ramps into and out of a p/b/m
+# People part their lips before they speak after a pause (an in-breath: real speakers 0.02-0.43 s before the
+# first sound, median 0.36 s, docs/real_faces.md): the last PRE_SPEECH_S of a pause of PAUSE_S or more opens
+# the jaw to PRE_SPEECH_JAW.
+PRE_SPEECH_S, PAUSE_S, PRE_SPEECH_JAW = 0.3, 0.3, 0.0
 
 PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
 PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range
@@ -146,7 +154,10 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
         text, start, end = _phone_fields(ph)
         if end <= start:
             continue
-        if start - cursor > 0.02:
+        if start - cursor >= PAUSE_S and PRE_SPEECH_JAW > 0:
+            breath = start - PRE_SPEECH_S
+            segments += [(cursor, breath, "rest", 1.0), (breath, start, "inhale", 1.0)]
+        elif start - cursor > 0.02:
             segments.append((cursor, start, "rest", 1.0))
         parts = phone_visemes(text, alphabet)
         stress = phone_stress(text, alphabet) if parts[0] in VOWEL_VISEMES else None
@@ -180,9 +191,11 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     is_close = np.array([c == "lip_close" for c in LOWER_CHANNELS])
     num = np.zeros((n, C))
     den = np.full((n, C), 1e-9)
-    ahead, behind = 0.07 * style.coarticulation, 0.045 * style.coarticulation
+    ahead, behind = ANTICIPATION_S * style.coarticulation, CARRYOVER_S * style.coarticulation
     for start, end, vis, gain in segments:
         target, dom_jaw, dom_lips = VISEMES[vis]
+        if vis == "inhale":
+            target = _v(jaw_open=PRE_SPEECH_JAW)
         if gain != 1.0:
             target = np.where(is_close, target, np.clip(target * gain, 0.0, 1.0))
         centre, half = (start + end) / 2, (end - start) / 2
@@ -203,9 +216,9 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
         def envelope(ramp: float, start: float = start, end: float = end) -> np.ndarray:
             return np.clip(np.minimum(t - start + ramp, end + ramp - t) / ramp, 0, 1)
 
-        env = envelope(0.03)
+        env = envelope(CLOSE_RAMP_S)
         curves[:, idx["lip_close"]] = np.maximum(curves[:, idx["lip_close"]], env)
-        env = envelope(0.06)  # the jaw closes more slowly
+        env = envelope(JAW_CLOSE_RAMP_S)  # the jaw closes more slowly
         jaw = curves[:, idx["jaw_open"]]
         curves[:, idx["jaw_open"]] = jaw * (1 - env) + np.minimum(jaw, 0.06) * env
         for c in ("lip_wide", "lip_funnel", "lower_lip_tuck"):

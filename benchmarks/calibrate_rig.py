@@ -1,0 +1,179 @@
+"""Calibrate the rig's lips on real faces (issue 23): fit the rig's opening and timing parameters so that its
+lip aperture follows the real one tracked in the GRID clips of benchmarks/real_faces.py.
+
+Input: a result of `python benchmarks/real_faces.py` (benchmarks/results/real_faces_NAME.json), which holds, per
+clip, the real inner-lip aperture tracked with MediaPipe (cm on the iris scale, 25 fps) and the phones
+facegen's aligner found in its audio. For a set of parameters the rig's curves are rebuilt from those phones
+(facegen.synth.curves.viseme_curves, the synthetic corpus's own code), posed on the procedural face and
+measured geometrically (facegen.lipsync.aperture, cm). The fit maximises the aperture correlation and brings
+the median open-speech ratio to 1 on half the clips (every other one, sorted by name) and reports both halves,
+so the held-out half says whether it generalises.
+
+The parameters (facegen.synth.curves): a gain on every vowel's jaw opening and one per vowel class (open,
+mid, spread, rounded), the consonants' jaw dominance (how much a consonant between two vowels closes the jaw),
+and the anticipation and carry-over time constants of coarticulation. Bounds keep them physical (see
+docs/real_faces.md for the published figures they are held against).
+
+    python benchmarks/calibrate_rig.py [benchmarks/results/real_faces_default.json] [--evals 300]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+CLASSES = {"open": ("AA", "AE", "AO"), "mid": ("AH", "EH", "ER", "OW"), "spread": ("IY", "IH"),
+           "rounded": ("UW", "UH")}
+# name: (start, low, high)
+PARAMS = {
+    "jaw_gain": (1.0, 0.6, 2.5),
+    "open": (1.0, 0.6, 1.6),
+    "mid": (1.0, 0.6, 1.6),
+    "spread": (1.0, 0.6, 3.0),
+    "rounded": (1.0, 0.6, 2.0),
+    "consonant_jaw_dominance": (1.0, 0.2, 1.5),
+    "anticipation_s": (0.07, 0.03, 0.15),
+    "carryover_s": (0.045, 0.02, 0.12),
+}
+OPEN_CM = 0.2  # real aperture above which a frame is open speech (as real_faces.py)
+
+
+def load(path: Path) -> list[dict]:
+    """The clips: name, real aperture [T] (cm), phones [(CMU, start, end)], words, fps 25."""
+    result = json.loads(path.read_text())
+    clips = []
+    for name, clip in sorted(result["clips"].items()):
+        real = np.asarray(clip["tracks"]["real"]["aperture"], np.float64)
+        clips.append({"name": name, "real": real, "phones": [tuple(p) for p in clip["phones"]],
+                      "words": clip["words"]})
+    return clips
+
+
+def apply(params: dict) -> dict:
+    """Set the rig's parameters in facegen.synth.curves (a fit, not the shipped values); the old ones back."""
+    from facegen.synth import curves
+
+    old = {"VISEMES": dict(curves.VISEMES), "ANTICIPATION_S": curves.ANTICIPATION_S,
+           "CARRYOVER_S": curves.CARRYOVER_S}
+    visemes = dict(old["VISEMES"])
+    for vis, (target, dom_jaw, dom_lips) in old["VISEMES"].items():
+        target = target.copy()
+        cls = next((c for c, members in CLASSES.items() if vis in members), None)
+        if cls is not None:
+            target[0] = min(target[0] * params["jaw_gain"] * params[cls], 1.0)
+        elif vis not in ("rest", "PBM"):
+            dom_jaw = dom_jaw * params["consonant_jaw_dominance"]
+        visemes[vis] = (target, dom_jaw, dom_lips)
+    curves.VISEMES = visemes
+    curves.ANTICIPATION_S = params["anticipation_s"]
+    curves.CARRYOVER_S = params["carryover_s"]
+    return old
+
+
+def restore(old: dict) -> None:
+    from facegen.synth import curves
+
+    for key, value in old.items():
+        setattr(curves, key, value)
+
+
+class Scorer:
+    """The rig's aperture for every clip under a set of parameters, and how it compares with the real one."""
+
+    def __init__(self) -> None:
+        from facegen.face.rig import CHANNELS, LOWER_CHANNELS
+        from facegen.lipsync import FaceGeometry
+        from facegen.synth.reference import _template_rig
+
+        self.rig = _template_rig()
+        self.geo = FaceGeometry.of(self.rig.mesh if hasattr(self.rig, "mesh") else _mesh())
+        self.n_channels, self.n_lower = len(CHANNELS), len(LOWER_CHANNELS)
+
+    def aperture(self, clip: dict) -> np.ndarray:
+        from facegen.lipsync import aperture
+        from facegen.synth.curves import viseme_curves
+
+        lower = viseme_curves(clip["phones"], len(clip["real"]), 25.0, alphabet="cmu")
+        weights = np.zeros((len(lower), self.n_channels))
+        weights[:, :self.n_lower] = lower
+        return aperture(self.rig.pose(weights), self.geo)
+
+    def measure(self, clips: list[dict], params: dict) -> dict:
+        old = apply(params)
+        try:
+            rs, ratios = [], []
+            for clip in clips:
+                ours, real = self.aperture(clip), clip["real"]
+                rs.append(float(np.corrcoef(ours, real)[0, 1]))
+                open_ = real > OPEN_CM
+                ratios.append(float(np.median(ours[open_] / real[open_])) if open_.any() else 1.0)
+        finally:
+            restore(old)
+        return {"r": float(np.mean(rs)), "ratio": float(np.median(ratios)), "rs": rs}
+
+
+def _mesh():
+    from facegen.face.template import load_template
+
+    return load_template()
+
+
+def loss(measured: dict) -> float:
+    return (1.0 - measured["r"]) + 0.5 * abs(np.log(max(measured["ratio"], 1e-3)))
+
+
+def fit(scorer: Scorer, clips: list[dict], evals: int) -> dict:
+    from scipy.optimize import minimize
+
+    names = list(PARAMS)
+    low = np.array([PARAMS[n][1] for n in names])
+    high = np.array([PARAMS[n][2] for n in names])
+
+    def unpack(x: np.ndarray) -> dict:
+        return dict(zip(names, np.clip(x, low, high), strict=True))
+
+    def objective(x: np.ndarray) -> float:
+        penalty = float(np.sum(np.maximum(low - x, 0) + np.maximum(x - high, 0))) * 10
+        return loss(scorer.measure(clips, unpack(x))) + penalty
+
+    x0 = np.array([PARAMS[n][0] for n in names])
+    found = minimize(objective, x0, method="Nelder-Mead",
+                     options={"maxfev": evals, "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": None})
+    return {k: round(float(v), 4) for k, v in unpack(found.x).items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("result", type=Path, nargs="?", default=HERE / "results" / "real_faces_default.json")
+    ap.add_argument("--evals", type=int, default=300)
+    ap.add_argument("--json", type=Path, help="write the fitted parameters and the figures here")
+    args = ap.parse_args(argv)
+    clips = load(args.result)
+    fit_on, held_out = clips[0::2], clips[1::2]
+    scorer = Scorer()
+    start = {n: v[0] for n, v in PARAMS.items()}
+    t0 = time.perf_counter()
+    params = fit(scorer, fit_on, args.evals)
+    rows = {}
+    for label, p in (("today's rig", start), ("fitted", params)):
+        rows[label] = {part: scorer.measure(group, p) for part, group in (("fit", fit_on),
+                                                                           ("held out", held_out))}
+    print(f"{len(clips)} clips ({len(fit_on)} fit, {len(held_out)} held out), {time.perf_counter() - t0:.0f} s")
+    print("| rig | fit: r | fit: ratio | held out: r | held out: ratio |\n|---|---|---|---|---|")
+    for label, m in rows.items():
+        print(f"| {label} | {m['fit']['r']:.2f} | {m['fit']['ratio']:.2f} | {m['held out']['r']:.2f} | "
+              f"{m['held out']['ratio']:.2f} |")
+    print("fitted:", json.dumps(params))
+    if args.json:
+        args.json.write_text(json.dumps({"params": params, "rows": rows}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
