@@ -1,8 +1,8 @@
 """Calibrate the rig's lips on real faces (issue 23): fit the rig's opening and timing parameters so that its
 lip aperture follows the real one tracked in the GRID clips of benchmarks/real_faces.py.
 
-Input: a result of `python benchmarks/real_faces.py` (benchmarks/results/real_faces_NAME.json), which holds, per
-clip, the real inner-lip aperture tracked with MediaPipe (cm on the iris scale, 25 fps) and the phones
+Input: a result of `python benchmarks/real_faces.py` (benchmarks/results/real_faces_NAME.json), which holds,
+per clip, the real inner-lip aperture tracked with MediaPipe (cm on the iris scale, 25 fps) and the phones
 facegen's aligner found in its audio. For a set of parameters the rig's curves are rebuilt from those phones
 (facegen.synth.curves.viseme_curves, the synthetic corpus's own code), posed on the procedural face and
 measured geometrically (facegen.lipsync.aperture, cm). The fit maximises the aperture correlation and brings
@@ -11,7 +11,8 @@ so the held-out half says whether it generalises.
 
 The parameters (facegen.synth.curves): a gain on every vowel's jaw opening and one per vowel class (open,
 mid, spread, rounded), the consonants' jaw dominance (how much a consonant between two vowels closes the jaw),
-and the anticipation and carry-over time constants of coarticulation. Bounds keep them physical (see
+the anticipation and carry-over time constants of coarticulation, the jaw opening of the in-breath before
+speech after a pause and the lips' ramp into and out of a p/b/m. Bounds keep them physical (see
 docs/real_faces.md for the published figures they are held against).
 
     python benchmarks/calibrate_rig.py [benchmarks/results/real_faces_default.json] [--evals 300]
@@ -35,11 +36,13 @@ PARAMS = {
     "jaw_gain": (1.0, 0.6, 2.5),
     "open": (1.0, 0.6, 1.6),
     "mid": (1.0, 0.6, 1.6),
-    "spread": (1.0, 0.6, 3.0),
+    "spread": (1.0, 0.6, 2.0),  # GRID's /i/ (letters read aloud: "e", "three") opens unusually wide
     "rounded": (1.0, 0.6, 2.0),
     "consonant_jaw_dominance": (1.0, 0.2, 1.5),
     "anticipation_s": (0.07, 0.03, 0.15),
-    "carryover_s": (0.045, 0.02, 0.12),
+    "carryover_s": (0.045, 0.015, 0.12),
+    "pre_speech_jaw": (0.0, 0.0, 0.3),
+    "close_ramp_s": (0.03, 0.01, 0.06),
 }
 OPEN_CM = 0.2  # real aperture above which a frame is open speech (as real_faces.py)
 
@@ -60,7 +63,8 @@ def apply(params: dict) -> dict:
     from facegen.synth import curves
 
     old = {"VISEMES": dict(curves.VISEMES), "ANTICIPATION_S": curves.ANTICIPATION_S,
-           "CARRYOVER_S": curves.CARRYOVER_S}
+           "CARRYOVER_S": curves.CARRYOVER_S, "PRE_SPEECH_JAW": curves.PRE_SPEECH_JAW,
+           "CLOSE_RAMP_S": curves.CLOSE_RAMP_S}
     visemes = dict(old["VISEMES"])
     for vis, (target, dom_jaw, dom_lips) in old["VISEMES"].items():
         target = target.copy()
@@ -73,6 +77,8 @@ def apply(params: dict) -> dict:
     curves.VISEMES = visemes
     curves.ANTICIPATION_S = params["anticipation_s"]
     curves.CARRYOVER_S = params["carryover_s"]
+    curves.PRE_SPEECH_JAW = params["pre_speech_jaw"]
+    curves.CLOSE_RAMP_S = params["close_ramp_s"]
     return old
 
 
@@ -164,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     for label, p in (("today's rig", start), ("fitted", params)):
         rows[label] = {part: scorer.measure(group, p) for part, group in (("fit", fit_on),
                                                                            ("held out", held_out))}
-    print(f"{len(clips)} clips ({len(fit_on)} fit, {len(held_out)} held out), {time.perf_counter() - t0:.0f} s")
+    print(f"{len(clips)} clips ({len(fit_on)} fit, {len(held_out)} held out), "
+          f"{time.perf_counter() - t0:.0f} s")
     print("| rig | fit: r | fit: ratio | held out: r | held out: ratio |\n|---|---|---|---|---|")
     for label, m in rows.items():
         print(f"| {label} | {m['fit']['r']:.2f} | {m['fit']['ratio']:.2f} | {m['held out']['r']:.2f} | "
