@@ -53,38 +53,38 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
     "inhale": (_v(), 1.0, 1.0),  # the lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
     "PBM": (_v(jaw_open=0.04, lip_close=1.0), 1.5, 2.5),
-    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 1.5, 3.0),
-    "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.5, 0.8),
-    "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 2.0, 1.2),
-    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 1.2, 2.5),
-    "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 1.0, 0.3),
-    "L": (_v(jaw_open=0.2), 1.0, 0.3),
-    "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 1.0, 2.0),
-    "KG": (_v(jaw_open=0.2), 0.8, 0.3),
-    "H": (_v(jaw_open=0.25), 0.3, 0.2),
-    "W": (_v(jaw_open=0.05, lip_round=1.0), 1.2, 3.0),
-    "Y": (_v(jaw_open=0.1, lip_wide=0.5), 1.0, 1.5),
-    "AA": (_v(jaw_open=0.65, lip_wide=0.1), 2.5, 1.0),
-    "AE": (_v(jaw_open=0.55, lip_wide=0.3), 2.5, 1.0),
-    "AH": (_v(jaw_open=0.35), 2.0, 0.8),
-    "ER": (_v(jaw_open=0.3, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
-    "EH": (_v(jaw_open=0.45, lip_wide=0.35), 2.0, 1.2),
-    "IY": (_v(jaw_open=0.12, lip_wide=0.85), 2.0, 2.0),
-    "IH": (_v(jaw_open=0.2, lip_wide=0.55), 2.0, 1.5),
-    "AO": (_v(jaw_open=0.55, lip_round=0.55), 2.0, 2.0),
-    "OW": (_v(jaw_open=0.4, lip_round=0.7), 2.0, 2.5),
-    "UH": (_v(jaw_open=0.2, lip_round=0.6), 2.0, 2.5),
-    "UW": (_v(jaw_open=0.1, lip_round=1.0), 2.0, 3.5),
+    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 1.1, 3.0),
+    "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.1, 0.8),
+    "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 1.46, 1.2),
+    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 0.88, 2.5),
+    "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 0.73, 0.3),
+    "L": (_v(jaw_open=0.2), 0.73, 0.3),
+    "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 0.73, 2.0),
+    "KG": (_v(jaw_open=0.2), 0.58, 0.3),
+    "H": (_v(jaw_open=0.25), 0.22, 0.2),
+    "W": (_v(jaw_open=0.05, lip_round=1.0), 0.88, 3.0),
+    "Y": (_v(jaw_open=0.1, lip_wide=0.5), 0.73, 1.5),
+    "AA": (_v(jaw_open=0.85, lip_wide=0.1), 2.5, 1.0),
+    "AE": (_v(jaw_open=0.72, lip_wide=0.3), 2.5, 1.0),
+    "AH": (_v(jaw_open=0.77), 2.0, 0.8),
+    "ER": (_v(jaw_open=0.66, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
+    "EH": (_v(jaw_open=0.99, lip_wide=0.35), 2.0, 1.2),
+    "IY": (_v(jaw_open=0.35, lip_wide=0.85), 2.0, 2.0),
+    "IH": (_v(jaw_open=0.58, lip_wide=0.55), 2.0, 1.5),
+    "AO": (_v(jaw_open=0.72, lip_round=0.55), 2.0, 2.0),
+    "OW": (_v(jaw_open=0.88, lip_round=0.7), 2.0, 2.5),
+    "UH": (_v(jaw_open=0.26, lip_round=0.6), 2.0, 2.5),
+    "UW": (_v(jaw_open=0.13, lip_round=1.0), 2.0, 3.5),
 }
 
 VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
-ANTICIPATION_S = 0.07  # s, time constant of a segment's dominance before it (coarticulation ahead)
-CARRYOVER_S = 0.045  # s, after it
-CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.03, 0.06  # s, the lips' and the jaw's ramps into and out of a p/b/m
+ANTICIPATION_S = 0.117  # s, time constant of a segment's dominance before it (coarticulation ahead)
+CARRYOVER_S = 0.03  # s, after it
+CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.034, 0.06  # s, the lips' and the jaw's ramps into and out of a p/b/m
 # People part their lips before they speak after a pause (an in-breath: real speakers 0.02-0.43 s before the
 # first sound, median 0.36 s, docs/real_faces.md): the last PRE_SPEECH_S of a pause of PAUSE_S or more opens
 # the jaw to PRE_SPEECH_JAW.
-PRE_SPEECH_S, PAUSE_S, PRE_SPEECH_JAW = 0.3, 0.3, 0.0
+PRE_SPEECH_S, PAUSE_S, PRE_SPEECH_JAW = 0.3, 0.3, 0.2
 
 PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
 PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range
