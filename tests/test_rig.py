@@ -212,7 +212,9 @@ def test_lips_close_on_bilabials_and_the_jaw_opens_for_vowels():
     assert close[in_p].min() > 0.99 and jaw[in_p].max() < 0.07
     mid_vowels = [int(0.38 * FPS), int(0.72 * FPS)]
     assert jaw[mid_vowels].min() > 0.3 and close[mid_vowels].max() < 0.3
-    assert np.abs(curves[:2]).max() < 0.05  # silence before speech: rest
+    # silence before speech: near rest, the lips parting ahead of it (coarticulation 0.117 s, calibrated on
+    # real faces: people's lips lead their sound)
+    assert np.abs(curves[:2]).max() < 0.15 and jaw[0] < jaw[1] < 0.5 * jaw[mid_vowels].min()
     assert np.abs(curves[-3:]).max() < 0.01  # and after it
     assert np.all(np.diff(jaw[:7]) > 0)  # the jaw starts opening before the vowel (anticipation)
 
