@@ -73,8 +73,12 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
 
     if model and template:
         raise FacegenError("--model and --template cannot be used together: pass one reference")
-    if not Path(file).is_file():
+    if not Path(file).exists():
         raise FacegenError(f"{file} does not exist: pass the animation file to check")
+    from facegen.input_files import check_input
+
+    # a FIFO, a device or a folder: said as what it is (validate reads files in bounded memory, any size)
+    check_input(file, what="animation file", limit=1 << 62, too_big="", fix="pass the animation file to check")
     mesh = None
     if model:
         from facegen.bundle import read_template
