@@ -78,7 +78,7 @@ def validate(file, model, template, fps, audio_path, no_audio_required, referenc
     from facegen.input_files import check_input
 
     # a FIFO, a device or a folder: said as what it is (validate reads files in bounded memory, any size)
-    check_input(file, what="animation file", limit=1 << 62, too_big="", fix="pass the animation file to check")
+    check_input(file, what="animation file", limit=1 << 62, too_big="", fix="pass the animation file")
     mesh = None
     if model:
         from facegen.bundle import read_template
