@@ -360,3 +360,13 @@ def test_csv_bounds_are_the_same_in_validate_and_the_helper(tmp_path):
     assert clip["fps"] == FPS
     np.testing.assert_array_equal(clip["frames"], np.arange(FRAMES))
     assert float(clip["weights"].min()) == float(clip["weights"].max()) == 0.25
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes")
+def test_validate_says_what_a_special_file_is(tmp_path):
+    fifo = tmp_path / "take.json"
+    os.mkfifo(fifo)
+    for path, kind in ((fifo, "a named pipe (FIFO)"), (Path("/dev/zero"), "a character device")):
+        done = subprocess.run([sys.executable, "-m", "facegen", "validate", str(path)], capture_output=True,
+                              text=True, timeout=120, check=False)
+        assert done.returncode == 2 and done.stderr.count("\n") == 1 and kind in done.stderr, done.stderr
