@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -38,27 +38,35 @@ def write(anim: Animation, path: str | os.PathLike, *, write_audio: bool = True,
     return write_fitted(anim, path, _document, write_audio, audio_source)
 
 
-def write_fitted(anim: Animation, path: str | os.PathLike, text: Callable[[Animation, Fit, str], str],
-                 write_audio: bool, audio_source: str | os.PathLike | None) -> list[Path]:
-    """Fit the ARKit weights of `anim`, write `text(anim, fit, audio track name or "")` to `path` and the
-    audio as a WAV sidecar, atomically; return the files. Shared by the ARKit weight formats (JSON, CSV)."""
+def write_fitted(anim: Animation, path: str | os.PathLike,
+                 text: Callable[[Animation, Fit, str], str | Iterable[str]], write_audio: bool,
+                 audio_source: str | os.PathLike | None) -> list[Path]:
+    """Fit the ARKit weights of `anim`, write `text(anim, fit, audio track name or "")` (the text, or its
+    parts in order) to `path` and the audio as a WAV sidecar, atomically; return the files. Shared by the
+    ARKit weight formats (JSON, CSV)."""
     check_animation(anim)
     fit = fit_arkit(anim)
     path = Path(path)
     audio = anim.audio if write_audio and anim.audio is not None and len(anim.audio) else None
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav):
-        tmp.write_text(text(anim, fit, wav.name if wav is not None else ""))
+        parts = text(anim, fit, wav.name if wav is not None else "")
+        with open(tmp, "w", encoding="utf-8") as file:
+            file.writelines([parts] if isinstance(parts, str) else parts)
     return [path] if wav is None else [path, wav]
 
 
-def _document(anim: Animation, fit: Fit, track: str) -> str:
+ROWS = 4096  # weightMat rows turned into text at a time: a long clip's rows never exist as Python floats
+
+
+def _document(anim: Animation, fit: Fit, track: str) -> Iterator[str]:
+    """The JSON text in parts: the text of json.dumps, with weightMat's rows made a block at a time."""
     doc = {
         "exportFps": int(anim.fps) if float(anim.fps).is_integer() else float(anim.fps),
         "trackPath": track,
         "numPoses": len(fit.names),
         "numFrames": len(fit.weights),
         "facsNames": list(fit.names),
-        "weightMat": fit.weights.astype(np.float64).round(DECIMALS).tolist(),
+        "weightMat": [],
         "facegen": {
             "version": __version__,
             "model": anim.metadata.get("model"),
@@ -67,4 +75,9 @@ def _document(anim: Animation, fit: Fit, track: str) -> str:
             "audio": track or None,
         },
     }
-    return json.dumps(doc, separators=(",", ":")) + "\n"
+    head, tail = json.dumps(doc, separators=(",", ":")).split('"weightMat":[]')
+    yield head + '"weightMat":['
+    for start in range(0, len(fit.weights), ROWS):
+        rows = fit.weights[start:start + ROWS].astype(np.float64).round(DECIMALS).tolist()
+        yield ("," if start else "") + json.dumps(rows, separators=(",", ":"))[1:-1]
+    yield "]" + tail + "\n"
