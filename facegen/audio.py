@@ -70,13 +70,18 @@ def mel_filters(cfg: FeatureConfig) -> np.ndarray:
 
 MIN_SAMPLE_RATE, MAX_SAMPLE_RATE = 4000, 384000  # Hz: telephone speech to studio masters
 MAX_SECONDS = 4 * 3600  # the longest audio facegen reads (an audiobook chapter, a long podcast)
+HELD_BYTES = 512 << 20  # the most a clip's samples take at their own rate (float32): 2.3 h at 16 kHz
+HELD_RATES = (44100, 32000, 24000, 22050, 16000)  # a longer clip's rate: the highest that fits, or 16 kHz
 
 
 def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tuple[np.ndarray, int]:
     """Read audio of any common format, rate, channel count and sample format: a file path, or the bytes of
     an encoded file (a WAV inside a USDZ package, the MP3 inside a GLB). The one place audio is read.
 
-    Returns mono float32 samples in [-1, 1] (channels averaged) at the source's own sample rate.
+    Returns mono float32 samples in [-1, 1] (channels averaged) and their sample rate: the source's own,
+    unless they would take more than HELD_BYTES (48 kHz audio over 46 minutes): then they are resampled as
+    they are read to the highest of HELD_RATES that fits (at least 16 kHz, the rate the network and the
+    aligner hear), so two hours at 48 kHz stereo take 460 MB, not 1.4 GB as float32 at 48 kHz.
     """
     import io
 
@@ -104,9 +109,18 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
             # block by block, the channels averaged as they come: a long stereo file never exists as floats.
             # (Not SoundFile.blocks: it sizes the last block by the header's frame count, an estimate for MP3,
             # and hands back the samples past the real end uninitialised.)
-            blocks = []
+            rate = held_rate(sr, f.frames)
+            stream = resampler(sr, rate) if rate != sr else None
+            samples, read = _Samples(f.frames * rate // sr + 64), 0
             while len(block := f.read(1 << 20, dtype="float32", always_2d=True)):
-                blocks.append(block.mean(axis=1) if block.shape[1] > 1 else block[:, 0])
+                read += len(block)
+                if read > MAX_SECONDS * sr:  # a header that understates the length
+                    raise FacegenError(f"{name} is longer than {MAX_SECONDS // 3600} hours; facegen animates "
+                                       f"up to {MAX_SECONDS // 3600} hours: cut it into parts")
+                mono = block.mean(axis=1) if block.shape[1] > 1 else block[:, 0]
+                samples.add(stream.resample_chunk(mono) if stream is not None else mono)
+            if stream is not None:
+                samples.add(stream.resample_chunk(np.zeros(0, np.float32), last=True))
     except sf.LibsndfileError as exc:
         raise FacegenError(
             f"cannot read {name} as audio ({exc.error_string if hasattr(exc, 'error_string') else exc}): "
@@ -114,11 +128,39 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
         ) from exc
     except (OSError, RuntimeError, TypeError) as exc:
         raise FacegenError(f"cannot read {name} as audio ({exc}): {fix}") from exc
-    samples = np.concatenate(blocks) if blocks else np.zeros(0, np.float32)
-    samples = np.ascontiguousarray(samples, dtype=np.float32)
-    if not np.isfinite(samples).all():
+    samples = samples.array()
+    if not all(np.isfinite(samples[s:s + (1 << 22)]).all() for s in range(0, len(samples), 1 << 22)):
         raise FacegenError(f"audio {name} contains NaN or infinite samples: re-export it")
-    return samples, int(sr)
+    return samples, int(rate)
+
+
+class _Samples:
+    """Samples read block by block into one array, sized by the header (its pages are only taken as they are
+    written) and doubled when a header understated the length: the samples exist once, never also as a list
+    of blocks (whose freed memory the allocator may keep)."""
+
+    def __init__(self, expected: int) -> None:
+        self.buffer, self.size = np.empty(max(expected, 1 << 16), np.float32), 0
+
+    def add(self, block: np.ndarray) -> None:
+        if self.size + len(block) > len(self.buffer):
+            grown = np.empty(max(2 * len(self.buffer), self.size + len(block)), np.float32)
+            grown[:self.size] = self.buffer[:self.size]
+            self.buffer = grown
+        self.buffer[self.size:self.size + len(block)] = block
+        self.size += len(block)
+
+    def array(self) -> np.ndarray:
+        return self.buffer[:self.size]
+
+
+def held_rate(rate: int, frames: int) -> int:
+    """The rate `frames` samples at `rate` are held at: their own if they fit in HELD_BYTES, else the highest
+    of HELD_RATES below it that fits (16 kHz at least)."""
+    if frames * 4 <= HELD_BYTES:
+        return rate
+    fits = [r for r in HELD_RATES if r < rate and frames * r / rate * 4 <= HELD_BYTES]
+    return max(fits) if fits else min(rate, HELD_RATES[-1])
 
 
 def write_wav(samples: np.ndarray, sample_rate: int, path: str | os.PathLike,
@@ -134,13 +176,26 @@ def write_wav(samples: np.ndarray, sample_rate: int, path: str | os.PathLike,
     return Path(path)
 
 
+RESAMPLE_BLOCK = 1 << 20  # samples resampled at a time
+
+
 def resample(samples: np.ndarray, orig_sr: int, target_sr: int) -> np.ndarray:
-    """Resample with soxr (librosa's default resampler), float32 out."""
+    """Resample with soxr (librosa's default resampler), float32 out: through its stream, a block at a time
+    (the same samples as in one call, which would hold a long clip's input as float32 twice)."""
     if orig_sr == target_sr:
         return samples.astype(np.float32, copy=False)
+    stream = resampler(orig_sr, target_sr)
+    parts = [stream.resample_chunk(np.asarray(samples[s:s + RESAMPLE_BLOCK], np.float32))
+             for s in range(0, len(samples), RESAMPLE_BLOCK)]
+    parts.append(stream.resample_chunk(np.zeros(0, np.float32), last=True))
+    return np.concatenate(parts)
+
+
+def resampler(orig_sr: int, target_sr: int):
+    """soxr's stream resampler of mono float32 audio (quality HQ, librosa's default)."""
     import soxr
 
-    return soxr.resample(samples, orig_sr, target_sr, quality="HQ").astype(np.float32)
+    return soxr.ResampleStream(orig_sr, target_sr, 1, dtype="float32", quality="HQ")
 
 
 def num_frames(duration: float, fps: float) -> int:
@@ -153,7 +208,13 @@ SILENT_PEAK = 1e-4  # -80 dBFS: audio whose peak stays below this holds no speec
 
 def is_silent(samples: np.ndarray) -> bool:
     """Whether `samples` peak below -80 dBFS (no speech to align or hear)."""
-    return len(samples) == 0 or float(np.max(np.abs(samples))) < SILENT_PEAK
+    return len(samples) == 0 or peak(samples) < SILENT_PEAK
+
+
+def peak(samples: np.ndarray) -> float:
+    """The largest absolute sample, a block at a time (no second copy of a long clip)."""
+    return max((float(np.abs(samples[s:s + (1 << 22)]).max()) for s in range(0, len(samples), 1 << 22)),
+               default=0.0)
 
 
 def check_speech(samples: np.ndarray, sr: int, fps: float, name: str = "audio",
@@ -169,37 +230,41 @@ def check_speech(samples: np.ndarray, sr: int, fps: float, name: str = "audio",
         raise FacegenError(f"{name} is silent (peak below -80 dBFS): pass a recording with speech")
 
 
+MEL_FRAMES = 2048  # spectrogram frames computed at a time (their 2048-point spectra: 17 MB)
+
+
 def mel_features(
     samples: np.ndarray, sr: int, cfg: FeatureConfig, filters: np.ndarray | None = None
 ) -> np.ndarray:
-    """Mel power spectrogram in dB, [T, n_mels] float32 with T = round(duration * fps)."""
+    """Mel power spectrogram in dB, [T, n_mels] float32 with T = round(duration * fps).
+
+    Computed MEL_FRAMES frames at a time, each block from the samples under it: the same numbers as one
+    centred STFT over the clip, in bounded memory (a 2-hour clip's spectra alone would take 1.5 GB) and in
+    short calls (a signal can stop it)."""
     import torch
 
     if filters is None:
         filters = mel_filters(cfg)
     y = resample(samples, sr, cfg.sample_rate)
     T = num_frames(len(samples) / sr, cfg.fps)
-    hop = cfg.hop_length
+    hop, pad = cfg.hop_length, cfg.n_fft // 2
+    frames = 1 + max(len(y), pad + 1) // hop  # a centred STFT's frames (torch pads a short signal)
+    window = torch.hann_window(cfg.n_fft)
+    bank = torch.from_numpy(filters)
+    feats = np.empty((T, cfg.n_mels), np.float32)
     with torch.inference_mode():
-        wav = torch.from_numpy(np.ascontiguousarray(y))
-        pad = cfg.n_fft // 2
-        if len(wav) <= pad:  # torch's padding needs more samples than the pad
-            wav = torch.nn.functional.pad(wav, (0, pad + 1 - len(wav)))
-        spec = torch.stft(
-            wav,
-            n_fft=cfg.n_fft,
-            hop_length=hop,
-            window=torch.hann_window(cfg.n_fft),
-            center=True,
-            pad_mode="constant",
-            return_complex=True,
-        )
-        power = spec.real.square() + spec.imag.square()  # [F, frames]
-        mel = torch.from_numpy(filters) @ power  # [n_mels, frames]
-        db = 10.0 * torch.log10(torch.clamp(mel, min=cfg.amin))
-    feats = db.T.numpy()
-    if feats.shape[0] >= T:
-        feats = feats[:T]
-    else:  # can only be short by a frame or so: repeat the last one
-        feats = np.concatenate([feats, np.repeat(feats[-1:], T - feats.shape[0], axis=0)])
-    return np.ascontiguousarray(feats, dtype=np.float32)
+        for first in range(0, frames, MEL_FRAMES):
+            last = min(first + MEL_FRAMES, frames)
+            start, stop = first * hop - pad, (last - 1) * hop - pad + cfg.n_fft  # the samples under them
+            piece = np.zeros(stop - start, np.float32)  # zeros beyond the signal, as the centred STFT's
+            inside = y[max(start, 0):max(min(stop, len(y)), 0)]
+            piece[max(-start, 0):max(-start, 0) + len(inside)] = inside
+            spec = torch.stft(torch.from_numpy(piece), n_fft=cfg.n_fft, hop_length=hop, window=window,
+                              center=False, return_complex=True)
+            power = spec.real.square() + spec.imag.square()  # [F, frames]
+            mel = bank @ power  # [n_mels, frames]
+            db = (10.0 * torch.log10(torch.clamp(mel, min=cfg.amin))).T.numpy()
+            feats[first:min(last, T)] = db[:max(min(last, T) - first, 0)]
+    if 0 < frames < T:  # can only be short by a frame or so: repeat the last one
+        feats[frames:] = feats[frames - 1]
+    return feats
