@@ -33,6 +33,9 @@ from facegen.runtime import threads
 
 BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
+LONG_FRAMES = 4096  # a longer clip runs the network this many frames at a time (`_long_states`)
+
+
 def _model_on(bundle, device):
     model = bundle.model
     if next(model.parameters()).device != device:
@@ -67,11 +70,12 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None,
     device = torch.device("cpu") if device is None else torch.device(device)
     model = _model_on(bundle, device)
     cfg = model.cfg
-    inputs = []
+    states: list = [None] * len(clips)
+    inputs, packed = [], []
     with torch.inference_mode(), _one_thread(device.type == "cpu"):
-        for mel, text, speaker, *rest in clips:
+        for i, (mel, text, speaker, *rest) in enumerate(clips):
             T = int(mel.shape[0])
-            phones_t = None
+            phones = None
             if cfg.n_phones:
                 if rest and rest[0] is not None:
                     phones = rest[0]
@@ -81,21 +85,79 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None,
                     phones = silence(T)
                 if phones.shape != (T, cfg.n_phones):
                     raise ValueError(f"phones must be [{T}, {cfg.n_phones}], got {list(phones.shape)}")
-                phones_t = torch.from_numpy(np.ascontiguousarray(phones, np.float32))[None].to(device)
-            mel_t = torch.from_numpy(np.ascontiguousarray(mel, np.float32))[None].to(device)
-            text_t = None
-            if cfg.uses_text:
-                if text is None:
-                    text = np.zeros((T, cfg.text_dim), np.float32)
-                if text.shape != (T, cfg.text_dim):
-                    raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
-                text_t = torch.from_numpy(np.ascontiguousarray(text, np.float32))[None].to(device)
+            if cfg.uses_text and text is not None and text.shape != (T, cfg.text_dim):
+                raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
             spk = model.speaker_one_hot(speaker).to(device)
+            if T > LONG_FRAMES:
+                states[i] = _long_states(model, mel, text, spk, phones, fusion_frames)
+                continue
+            text_t = phones_t = None
+            if cfg.n_phones:
+                phones_t = _tensor(phones, device)
+            mel_t = _tensor(mel, device)
+            if cfg.uses_text:
+                text_t = _tensor(np.zeros((T, cfg.text_dim), np.float32) if text is None else text, device)
             inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames,
                                               phones=phones_t)[0])
+            packed.append(i)
         if len(inputs) == 1:
-            return [model.decoder_states(inputs[0][None])[0]]
-        return list(unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False))))
+            states[packed[0]] = model.decoder_states(inputs[0][None])[0]
+        elif inputs:
+            found = unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False)))
+            for i, clip_states in zip(packed, found, strict=True):
+                states[i] = clip_states
+        return states
+
+
+def _tensor(array: np.ndarray, device):
+    """A [1, T, D] float32 tensor of a [T, D] array on `device` (a view on the CPU)."""
+    import torch
+
+    return torch.from_numpy(np.ascontiguousarray(array, np.float32))[None].to(device)
+
+
+def _long_states(model, mel: np.ndarray, text: np.ndarray | None, spk, phones: np.ndarray | None,
+                 fusion_frames: int):
+    """The decoder states of a clip longer than LONG_FRAMES, computed LONG_FRAMES frames at a time: each
+    call into torch is short (a signal can stop the run between them) and nothing of the length of the clip
+    exists but the decoder's input and two layers of its states. The same network: the convolutions see
+    their receptive field past each piece's edges; the LSTMs carry their state from piece to piece (the
+    backward directions from the end of the clip back); equal to one pass to float rounding
+    (tests/test_long_audio.py)."""
+    import torch
+
+    cfg, device = model.cfg, spk.device
+    T, step, halo = len(mel), LONG_FRAMES, cfg.receptive_field
+    x = torch.empty(T, cfg.decoder_dim, device=device)
+    text_state = None
+    for s in range(0, T, step):
+        e = min(s + step, T)
+        enc = {}
+        if model.audio is not None:
+            a, b = max(0, s - halo), min(T, e + halo)
+            mel_t = (_tensor(mel[a:b], device) - model.mel_mean) / model.mel_std
+            phones_t = _tensor(phones[a:b], device) if phones is not None else None
+            enc["audio"] = model.audio(mel_t, spk, phones_t)[:, s - a:e - a]
+        if model.text is not None:
+            words = np.zeros((e - s, cfg.text_dim), np.float32) if text is None else text[s:e]
+            hidden = model.text.fc2(model.text.act(model.text.fc1(_tensor(words, device))))
+            enc["text"], text_state = model.text.lstm(hidden, text_state)
+        for f in range(0, e - s, fusion_frames):
+            part = {k: v[:, f:f + fusion_frames] for k, v in enc.items()}
+            x[s + f:s + f + fusion_frames] = model.act(model.fc_in(model.fuse(part, spk)))[0]
+    for layer in range(cfg.lstm_layers):
+        out = torch.empty(T, 2 * cfg.lstm_dim, device=device)
+        for direction, suffix in enumerate(("", "_reverse")):
+            lstm = torch.nn.LSTM(x.shape[1], cfg.lstm_dim, batch_first=True).to(device)
+            for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
+                getattr(lstm, f"{name}_l0").copy_(getattr(model.lstm, f"{name}_l{layer}{suffix}"))
+            columns, state = slice(direction * cfg.lstm_dim, (direction + 1) * cfg.lstm_dim), None
+            for s in range(0, T, step) if direction == 0 else reversed(range(0, T, step)):
+                piece = x[s:s + step] if direction == 0 else x[s:s + step].flip(0)
+                y, state = lstm(piece[None], state)
+                out[s:s + step, columns] = y[0] if direction == 0 else y[0].flip(0)
+        x = out
+    return x
 
 
 def _one_thread(enabled: bool) -> contextlib.AbstractContextManager:
