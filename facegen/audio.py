@@ -169,10 +169,12 @@ def write_wav(samples: np.ndarray, sample_rate: int, path: str | os.PathLike,
     them as they are). The one place audio is written; callers that need atomicity pass a temporary path."""
     import soundfile as sf
 
-    samples = np.asarray(samples, dtype=np.float32).reshape(-1)
-    if subtype.startswith("PCM"):
-        samples = np.clip(samples, -1.0, 1.0)
-    sf.write(str(path), samples, int(sample_rate), subtype=subtype, format="WAV")
+    samples = np.asarray(samples).reshape(-1)
+    with sf.SoundFile(str(path), "w", samplerate=int(sample_rate), channels=1, subtype=subtype,
+                      format="WAV") as file:
+        for s in range(0, len(samples), 1 << 22):  # a block at a time: no clipped copy of a long clip
+            block = np.asarray(samples[s:s + (1 << 22)], dtype=np.float32)
+            file.write(np.clip(block, -1.0, 1.0) if subtype.startswith("PCM") else block)
     return Path(path)
 
 
