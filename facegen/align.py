@@ -23,6 +23,7 @@ from facegen.align_pieces import (
     HOP,
     LOOKAHEAD,
     LOOKBEHIND,
+    MAX_SEARCH,
     RATE,
     loud_frames,
     pieces,
@@ -153,11 +154,12 @@ def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_pho
             found = align_piece(part, [(t, s) for _, t, s in spoken[len(words) - back:]], stop - origin,
                                  n_frames - origin, cmn, prefix=not last)
             if found is None or len(found[1]) <= back:
-                if last:
+                if last or spans[p + 1][1] - start > MAX_SEARCH:
                     raise mismatch(UNALIGNED)
-                chosen = {i for i in chosen if i < p} | ({p} if any(i >= p for i in chosen) else set())
-                # a piece whose words cannot be told apart: align the rest at once
-                spans[p:] = [(start, n_frames)]
+                chosen = {i - (i > p) for i in chosen}
+                # a piece whose words cannot be told apart: aligned with the next one (not with all the rest:
+                # a search's time and its state pass's memory grow with its length times its words)
+                spans[p:p + 2] = [(start, spans[p + 1][1])]
                 continue
             decoder, segments = found
             kept = segments[back:] if last else [s for s in segments[back:] if s[1] < cut - origin]

@@ -159,18 +159,20 @@ def pcm16k(audio: np.ndarray, sample_rate: int) -> np.ndarray:
 LEVEL_SAMPLES = 1 << 24  # samples the level is measured on (17 minutes; longer audio: evenly spread ones)
 
 
-def pcm_bytes(audio: np.ndarray) -> bytes:
+def pcm_bytes(audio: np.ndarray) -> bytearray:
     """16-bit PCM at a standard level, over a faint noise floor: digital silence derails pocketsphinx.
-    Made a block at a time (the same bytes: the noise generator's stream does not depend on the blocks)."""
+    Made a block at a time, in place (the same bytes: the noise generator's stream does not depend on the
+    blocks; no second copy of a long clip's)."""
     spread = audio[::-(-len(audio) // LEVEL_SAMPLES)] if len(audio) > LEVEL_SAMPLES else audio
     level = float(np.percentile(np.abs(spread), 99.5)) or peak(audio)
     noise = np.random.default_rng(0)
-    out = np.empty(len(audio), "<i2")
+    pcm = bytearray(2 * len(audio))
+    out = np.frombuffer(pcm, "<i2")
     for s in range(0, len(audio), 1 << 22):
         x = audio[s:s + (1 << 22)] * (0.5 / level)
         x = x + noise.normal(0.0, 1e-3, len(x)).astype(np.float32)
         out[s:s + len(x)] = np.clip(x, -1.0, 1.0) * 32767
-    return out.tobytes()
+    return pcm
 
 
 def decode(decoder, pcm: bytes, cmn: str | None = None) -> list[tuple[str, int, int]]:
