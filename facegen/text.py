@@ -342,15 +342,22 @@ def frame_features(
         owner[frame_of] = word_of  # repeated frames: the last assignment (the later word) wins
         spoken = owner >= 0
         out[spoken] = vectors[owner[spoken]]
-    return smooth_frames(out, config.text_window)
+    return smooth_frames(out, config.text_window, out=out)
 
 
-def smooth_frames(features: np.ndarray, window: tuple[int, int] = FeatureConfig.text_window) -> np.ndarray:
+SMOOTH_FRAMES = 4096  # frames smoothed at a time
+
+
+def smooth_frames(features: np.ndarray, window: tuple[int, int] = FeatureConfig.text_window,
+                  out: np.ndarray | None = None) -> np.ndarray:
     """Replace each frame by the mean of frames ``t - window[0] .. t + window[1]`` (``[T, D]`` float32).
 
     Near the sequence ends the window is clipped and the mean divides by the frames present (the
     paper's "average of its surrounding vectors"), so a constant sequence stays constant. Silent
-    (zero) frames inside the sequence count as frames. Computed with cumulative sums in float64.
+    (zero) frames inside the sequence count as frames. Computed with cumulative sums in float64, SMOOTH_FRAMES
+    frames at a time: each block's sums start from the running sum before it, so they are the very sums of
+    one cumulative sum over the clip, without its [T, D] float64 arrays (1.7 GB for two hours). `out` may be
+    `features` itself (smoothed in place).
     """
     features = np.asarray(features, np.float32)
     before, after = int(window[0]), int(window[1])
@@ -359,12 +366,21 @@ def smooth_frames(features: np.ndarray, window: tuple[int, int] = FeatureConfig.
     n = features.shape[0]
     if n == 0 or before + after == 0:
         return features.copy()
-    csum = np.zeros((n + 1, features.shape[1]), np.float64)
-    np.cumsum(features, axis=0, dtype=np.float64, out=csum[1:])
-    t = np.arange(n)
-    lo = np.maximum(t - before, 0)
-    hi = np.minimum(t + after + 1, n)
-    return ((csum[hi] - csum[lo]) / (hi - lo)[:, None]).astype(np.float32)
+    out = np.empty_like(features) if out is None else out
+    running = np.zeros((1, features.shape[1]), np.float64)  # the sum of the frames before `first`
+    first, kept = 0, features[:0].copy()  # kept: input frames first.. that `out` may have overwritten
+    for s in range(0, n, SMOOTH_FRAMES):
+        e = min(s + SMOOTH_FRAMES, n)
+        hi_end = min(e + after, n)
+        csum = np.cumsum(np.concatenate([running, kept, features[first + len(kept):hi_end]]), axis=0,
+                         dtype=np.float64)  # csum[k]: the sum of frames before first + k
+        t = np.arange(s, e)
+        lo, hi = np.maximum(t - before, 0), np.minimum(t + after + 1, n)
+        later = max(e - before, 0)  # where the next block's sums start
+        running, kept = csum[later - first][None], features[later:e].copy()
+        out[s:e] = ((csum[hi - first] - csum[lo - first]) / (hi - lo)[:, None]).astype(np.float32)
+        first = later
+    return out
 
 
 def text_features(
