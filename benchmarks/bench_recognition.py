@@ -69,8 +69,8 @@ def main(argv: list[str] | None = None) -> int:
                      "right": right_words(heard, said)})
     right = np.array([r for row in rows for r in row["right"]], bool)
     conf = np.array([c for row in rows for c in row["confidences"]])
-    print(f"{len(rows)} lines ({args.half} half), {len(right)} recognised words, {right.mean():.0%} right; "
-          f"recognition at {audio / max(seconds, 1e-9):.1f}x real time\n")
+    print(f"{len(rows)} lines ({args.half} half), {len(right)} recognised words, {right.mean():.0%} "
+          f"right; recognition at {audio / max(seconds, 1e-9):.1f}x real time\n")
     print("| bound | words kept | right among kept | right words lost | wrong words kept |\n|---|---|---|---|---|")
     for bound in BOUNDS:
         keep = conf >= bound

@@ -1,6 +1,6 @@
 """Without a transcript, the recognised words carry their lattice posteriors; the ones the recogniser is
-unsure of do not drive the upper face (a misheard "earth" would move the brows with the wrong meaning), and the CLI
-marks them in what it says it heard."""
+unsure of do not drive the upper face (a misheard "earth" would move the brows with the wrong meaning), and
+the CLI marks them in what it says it heard."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def test_every_word_has_a_posterior_and_right_words_are_surer_than_misheard_ones
     assert [w.text for w in heard.words] == [w.text for w in recognize(*load_audio(WAV))]
     assert len(heard.confidences) == len(heard.words)
     assert all(0.0 <= c <= 1.0 for c in heard.confidences)
-    said = set(["what", "an", "excellent", "room", "you", "have", "sir", "such", "expensive", "furnishings"])
+    said = {"what", "an", "excellent", "room", "you", "have", "sir", "such", "expensive", "furnishings"}
     right = [c for w, c in zip(heard.words, heard.confidences, strict=True) if w.text in said]
     wrong = [c for w, c in zip(heard.words, heard.confidences, strict=True) if w.text not in said]
     assert right and wrong and np.mean(right) > np.mean(wrong) + 0.15
@@ -55,8 +55,8 @@ def test_only_sure_words_drive_the_text_features(heard):
 
 
 def test_the_cli_marks_the_unsure_words_it_heard(tmp_path, heard):
-    done = subprocess.run([sys.executable, "-m", "facegen", "animate", str(WAV), "-o", str(tmp_path / "o.npy")],
-                          capture_output=True, text=True, timeout=600, check=False)
+    command = [sys.executable, "-m", "facegen", "animate", str(WAV), "-o", str(tmp_path / "o.npy")]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stderr
     line = next(x for x in done.stderr.splitlines() if "heard:" in x)
     expected = " ".join(w.text + ("?" if c < SURE else "") for w, c in zip(heard.words, heard.confidences,
