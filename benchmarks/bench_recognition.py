@@ -71,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     conf = np.array([c for row in rows for c in row["confidences"]])
     print(f"{len(rows)} lines ({args.half} half), {len(right)} recognised words, {right.mean():.0%} "
           f"right; recognition at {audio / max(seconds, 1e-9):.1f}x real time\n")
-    print("| bound | words kept | right among kept | right words lost | wrong words kept |\n|---|---|---|---|---|")
+    print("| bound | words kept | right among kept | right words lost | wrong words kept |")
+    print("|---|---|---|---|---|")
     for bound in BOUNDS:
         keep = conf >= bound
         mark = " (shipped)" if bound == SURE else ""
