@@ -123,7 +123,7 @@ def disk_full_error(target: str | os.PathLike, exc: BaseException | None,
     target = Path(target)
     folder = target.parent if str(target.parent) else Path(".")
     full = isinstance(exc, OSError) and exc.errno in FULL_ERRNOS
-    if not full and exc is not None and not isinstance(exc, (KeyboardInterrupt, SystemExit)):
+    if not full and isinstance(exc, Exception):  # not an interrupt, a signal (runtime.Terminated), an exit
         with contextlib.suppress(OSError):
             full = shutil.disk_usage(folder).free < LOW_SPACE
     if not full:

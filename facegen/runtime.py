@@ -245,9 +245,14 @@ BARS = Reporter(bars=True)  # progress bars only: the default of a long library 
 STDERR = Reporter.stderr()  # the command line's without --quiet: the default of train, evaluate and plots
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM or SIGHUP, raised where the process is: it unwinds like Ctrl-C, so every `atomic_path` removes
-    its temporary file and no partial output remains."""
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP, raised where the process is: it unwinds like Ctrl-C (`except Exception` lets it by),
+    so every `atomic_path` removes its temporary file and no partial output remains. Not a KeyboardInterrupt:
+    click answers those with a blank line (closing a terminal's ^C), which a signal has not earned.
+
+    Python runs the handler between two bytecodes only, so a stage that stays in C for long (a search over a
+    whole clip, a torch op over its frames) would keep it waiting: long clips are processed in pieces and
+    blocks that come back to Python every fraction of a second (tests/test_long_audio.py)."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signum)

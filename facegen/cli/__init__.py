@@ -69,6 +69,8 @@ def main(argv: list[str] | None = None) -> None:
 
 def _run(argv: list[str], debug: bool) -> int:
     """The command's exit code; errors a user can cause, interrupts and internal errors said in one line."""
+    from facegen.runtime import Terminated
+
     try:
         cli.main(args=argv, prog_name="facegen", standalone_mode=False)
         return 0
@@ -77,13 +79,13 @@ def _run(argv: list[str], debug: bool) -> int:
             raise
         click.echo(f"facegen: error: {exc}", err=True)
         return 2
-    except click.exceptions.Abort as exc:  # click turns KeyboardInterrupt (and Terminated) into Abort
+    except click.exceptions.Abort as exc:  # click turns KeyboardInterrupt into Abort
         return _interrupted(exc.__cause__)
     except click.ClickException as exc:
         hint = f" (see '{exc.ctx.command_path} --help')" if getattr(exc, "ctx", None) else ""
         click.echo(f"facegen: error: {exc.format_message()}{hint}", err=True)
         return exc.exit_code
-    except KeyboardInterrupt as exc:
+    except (KeyboardInterrupt, Terminated) as exc:
         return _interrupted(exc)
     except Exception as exc:
         if debug:
