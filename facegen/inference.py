@@ -302,17 +302,25 @@ def states_at_rate(states, fps_in: float, fps_out: float, frames: int):
     (80 ms at 25 fps; p/b/m closures last 70-120 ms) is still closed at any rate."""
     if frames == len(states) and fps_in == fps_out:
         return states
-    pos = np.minimum(np.arange(frames, dtype=np.float64) * (fps_in / fps_out), len(states) - 1)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, len(states) - 1)
-    w = (pos - lo).astype(np.float32)[:, None]
     if isinstance(states, np.ndarray):
-        return states[lo] * (1 - w) + states[hi] * w
-    import torch
+        out = np.empty((frames, *states.shape[1:]), states.dtype)
+    else:
+        import torch
 
-    wt = torch.from_numpy(w).to(states.device, states.dtype)
-    lo_t, hi_t = torch.from_numpy(lo).to(states.device), torch.from_numpy(hi).to(states.device)
-    return states[lo_t] * (1 - wt) + states[hi_t] * wt
+        out = torch.empty((frames, *states.shape[1:]), dtype=states.dtype, device=states.device)
+    for s in range(0, frames, 8192):  # a block at a time: no [frames, H] temporaries for a long clip
+        pos = np.minimum(np.arange(s, min(s + 8192, frames), dtype=np.float64) * (fps_in / fps_out),
+                         len(states) - 1)
+        lo = np.floor(pos).astype(np.int64)
+        hi = np.minimum(lo + 1, len(states) - 1)
+        w = (pos - lo).astype(np.float32)[:, None]
+        if isinstance(states, np.ndarray):
+            out[s:s + len(pos)] = states[lo] * (1 - w) + states[hi] * w
+        else:
+            wt = torch.from_numpy(w).to(states.device, states.dtype)
+            lo_t, hi_t = torch.from_numpy(lo).to(states.device), torch.from_numpy(hi).to(states.device)
+            out[s:s + len(pos)] = states[lo_t] * (1 - wt) + states[hi_t] * wt
+    return out
 
 
 def frame_stream(bundle, states, template: np.ndarray | None = None,
