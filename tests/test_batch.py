@@ -177,7 +177,7 @@ def test_batch_in_worker_processes_writes_validates_reports_and_skips(speech, mo
     assert {p.name for p in (out / "a").iterdir()} == {"s0.npy", "s0.glb", "s0.wav"}
 
     report = json.loads((out / "report.json").read_text())
-    assert report["summary"] == {"passed": 3, "failed": 0, "error": 2, "skipped": 0}
+    assert report["summary"] == {"passed": 3, "failed": 0, "error": 2, "skipped": 0, "flagged": 0}
     assert [(i["line"], i["output"], i["status"]) for i in report["items"]][:3] == [
         (2, "a/s0.npy", "passed"), (3, "s1.npy", "passed"), (4, "gone.npy", "error")]
     suite = ET.parse(out / "report.xml").getroot().find("testsuite")

@@ -360,14 +360,14 @@ def test_validator_catches_a_broken_file(clip, tmp_path):
 
 
 @pytest.mark.slow
-def test_sixty_seconds_fit_in_five_megabytes(tmp_path):
+def test_sixty_seconds_fit_in_six_megabytes(tmp_path):
     anim = rig_clip(1500)
     files = write_animation(anim, tmp_path / "minute.glb")
     size = files[0].stat().st_size
     # 4.88 MB at 0dc2807; the rig's visemes for espeak phonemes were corrected since (facegen.phonetics, one
     # measured table), so the same random clip moves more: 5.14 MB, same writer, same bytes for the same
-    # frames
-    assert size <= 5_200_000, f"{size} bytes"
+    # frames; the rig calibrated on real faces (issue 23) opens the mouth about twice as wide: 5.65 MB
+    assert size <= 6_000_000, f"{size} bytes"
     info = _doc(files[0]).asset.extras["facegen"]
     assert info["reconstructionError"] <= pca.DEFAULT_TOLERANCE
 
