@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from facegen.align_pieces import HOP, RATE, loud_frames, pieces
-from facegen.errors import FacegenError
 from facegen.phonetics import is_filler
 from facegen.sphinx import FRAME, LOCK, base_word, clip_cmn, decode, get_decoder, pcm16k, pcm_bytes
 from facegen.words import Word
@@ -29,6 +28,7 @@ SURE = 0.5  # a recognised word at least this likely drives the upper face (see 
 LONG_SECONDS = 60.0  # longer audio is recognised piece by piece (see the module docstring)
 MAX_PIECE_SECONDS = 15.0  # a piece without a pause is split into parts at most this long
 STEP_SECONDS = 0.5  # audio given to pocketsphinx per call
+LM_SEARCH = "_default"  # pocketsphinx's name of a decoder's language-model search
 
 
 @dataclass
@@ -72,21 +72,42 @@ def hear(audio: np.ndarray, sample_rate: int) -> Heard:
 
 
 def _hear_pieces(audio: np.ndarray, pcm: bytes) -> Heard:
-    """`hear` of long audio: piece by piece, each with its words' phones (see the module docstring)."""
-    from facegen.align import state_pass, word_phones
-
+    """`hear` of long audio: piece by piece, each with its words' phones (see the module docstring); the
+    second half in a forked process where there is a second core (`_helper`)."""
     duration, longest = len(audio) / RATE, int(MAX_PIECE_SECONDS * 100)
     spans = [(a + k * (b - a) // parts, a + (k + 1) * (b - a) // parts)
              for a, b in pieces(loud_frames(audio, len(audio) // HOP))
              for parts in [-(-(b - a) // longest)] for k in range(parts)]
-    heard = Heard([], [], [])
     with LOCK:
         cmn = clip_cmn(pcm)
+        get_decoder("recognize-long")  # made before the fork: the helper has it too
+    half = int(np.searchsorted([b for _, b in spans], spans[-1][1] / 2)) + 1
+    helper = _helper(pcm, spans[half:], cmn, duration)
+    try:
+        heard = _hear_spans(pcm, spans[:half] if helper else spans, cmn, duration)
+        rest = helper.result() if helper else None
+        if helper and rest is None:  # the helper gave no answer: its half here
+            rest = _hear_spans(pcm, spans[half:], cmn, duration)
+    finally:
+        if helper:
+            helper.close()
+    if rest is not None:
+        heard.words, heard.confidences, heard.phones = (heard.words + rest.words,
+                                                        heard.confidences + rest.confidences,
+                                                        heard.phones + rest.phones)
+    return heard
+
+
+def _hear_spans(pcm: bytes, spans: list[tuple[int, int]], cmn: str, duration: float) -> Heard:
+    """The words, confidences and phones of the pieces `spans` (frames) of `pcm`, in order."""
+    from facegen.align import word_phones
+
+    heard = Heard([], [], [])
+    with LOCK:
         decoder = get_decoder("recognize-long")
-        search = decoder.current_search()
         for first, end in spans:
             part = pcm[first * HOP * 2:end * HOP * 2]
-            decoder.activate_search(search)  # the state pass of the piece before left its own
+            decoder.activate_search(LM_SEARCH)  # a state pass left its own
             segments = [(base_word(w), a, b) for w, a, b in _decode_in_steps(decoder, part, cmn)
                         if not is_filler(w)]
             if not segments:
@@ -95,13 +116,78 @@ def _hear_pieces(audio: np.ndarray, pcm: bytes) -> Heard:
             heard.words += [Word(w, round((first + a) * FRAME, 3),
                                  round(min((first + b + 1) * FRAME, duration), 3)) for w, a, b in segments]
             heard.confidences += [_posterior(w, (a + b + 1) / 2 * FRAME, links) for w, a, b in segments]
-            try:
-                alignment = state_pass(decoder, part, cmn)
-            except (FacegenError, RuntimeError):  # no phones for this piece: the audio drives its lips
-                continue
-            heard.phones += [phone for word in word_phones(alignment, 0, len(segments), first, duration)
-                             for phone in word]
+            try:  # the state pass in steps too: a whole-utterance pass would change the pieces after it
+                decoder.set_alignment()
+                _decode_in_steps(decoder, part, cmn)
+                alignment = decoder.get_alignment()
+            except RuntimeError:
+                alignment = None
+            if alignment is not None:  # else no phones for this piece: the audio drives its lips
+                heard.phones += [phone for word in word_phones(alignment, 0, len(segments), first, duration)
+                                 for phone in word]
     return heard
+
+
+HELPER_SECONDS = 120.0  # audio (the helper's half) worth a forked process
+
+
+class _Helper:
+    """A forked process hearing some pieces: `result()` waits for its Heard (None if it gave none), `close()`
+    stops it."""
+
+    def __init__(self, process, receiver) -> None:
+        self.process, self.receiver = process, receiver
+
+    def result(self) -> Heard | None:
+        try:
+            return self.receiver.recv()  # a signal interrupts the wait: close() then stops the helper
+        except (EOFError, OSError):
+            return None
+
+    def close(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join()
+        self.receiver.close()
+
+
+def _helper(pcm: bytes, spans: list[tuple[int, int]], cmn: str, duration: float) -> _Helper | None:
+    """The pieces `spans` heard in a forked process, on a second core: recognition is the slow part of a long
+    clip without a transcript (about 6x real time per core). None where there is no second core, no fork,
+    other threads (a fork copies their locks), a daemonic process (a batch's worker may not have children)
+    or little audio."""
+    import multiprocessing
+    import threading
+
+    from facegen.processes import start_process
+    from facegen.runtime import cores
+
+    if (cores() < 2 or threading.active_count() > 1 or multiprocessing.current_process().daemon
+            or not spans or sum(b - a for a, b in spans) < HELPER_SECONDS * 100):
+        return None
+    receiver, sender = multiprocessing.Pipe(duplex=False)
+    process = start_process(_hear_child, (sender, pcm, spans, cmn, duration), start="fork",
+                            name="facegen-recognize")
+    sender.close()
+    if process is None:
+        receiver.close()
+        return None
+    return _Helper(process, receiver)
+
+
+def _hear_child(sender, pcm: bytes, spans: list[tuple[int, int]], cmn: str, duration: float) -> None:
+    """In the forked helper: hear `spans` and send the Heard (nothing on an error: the parent hears them)."""
+    import signal
+
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):  # the parent decides: it kills this process when it stops
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    try:
+        sender.send(_hear_spans(pcm, spans, cmn, duration))
+    except Exception:  # noqa: BLE001, S110 - no traceback here: the parent hears these pieces itself
+        pass
+    finally:
+        sender.close()
 
 
 def _decode_in_steps(decoder, pcm: bytes, cmn: str) -> list[tuple[str, int, int]]:
