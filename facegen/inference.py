@@ -236,6 +236,10 @@ class FrameStream:
         for s in range(start, stop, size):
             yield s, self.compute(s, min(s + size, stop))
 
+    def every(self, step: int) -> FrameStream:
+        """The stream of every `step`-th frame (the same weights; its states a copy of theirs)."""
+        return FrameStream(self._states[::step], self._weight, self._base, self.block_frames)
+
     def project(self, basis: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """(frames - origin) @ basis.T for every frame, [T, K] float64, for `basis` [K, 3V] and `origin` [3V],
         without computing a frame: the output layer is affine, so it is states @ (W.T basis.T) + (base -

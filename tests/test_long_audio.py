@@ -265,3 +265,16 @@ def test_sigterm_is_honoured_at_every_stage(speech, tmp_path, name, command, rea
     assert took <= 2.0, f"{name}: {took:.2f} s"
     assert said == ["facegen: stopped by SIGTERM"], (name, said)
     assert list(out.iterdir()) == [], name
+
+
+def test_a_long_clips_fit_errors_are_measured_on_spread_frames(monkeypatch):
+    from helpers import rig_clip
+
+    anim = rig_clip(300)
+    exact = solve.fit_arkit(anim)
+    monkeypatch.setattr(solve, "ERROR_FRAMES_MEASURED", 100)  # every third frame
+    sampled = solve.fit_arkit(anim)
+    assert np.array_equal(sampled.weights, exact.weights)
+    assert sampled.lip_error_mm == pytest.approx(exact.lip_error_mm, rel=0.05)
+    assert sampled.face_error_mm == pytest.approx(exact.face_error_mm, rel=0.05)
+    assert sampled.lip_error_mm != exact.lip_error_mm

@@ -24,7 +24,8 @@ is solved with that many frames of context on either side and keeps its middle. 
 stay the same however long the clip.
 The frames of a stream (inference.FrameStream) are never computed for B: the output layer is affine, so B
 comes from the decoder states (`FrameStream.project`). The fit's errors (mean per-vertex distance between the
-posed weights and the animation, on the lips and on the whole face) take one pass over the frames.
+posed weights and the animation, on the lips and on the whole face) take one pass over the frames, over
+ERROR_FRAMES_MEASURED evenly spread ones in a longer clip (computing every frame of two hours is 6.5 TFLOP).
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ SOLVE_FRAMES = 3000  # frames solved together (2 minutes at 25 fps); longer clip
 SOLVE_MARGIN = 300  # frames of context on either side of a block (the coupling fades as 0.94^frames at worst)
 BLOCK_FRAMES = 256  # frames per block when reading an animation (bounds the memory of both passes)
 ERROR_FRAMES = 16  # frames per step of the error pass
+ERROR_FRAMES_MEASURED = 15000  # a longer clip's errors: on this many evenly spread frames (10 minutes)
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,8 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *,
             for start, block in anim.frame_blocks(BLOCK_FRAMES):
                 rhs[start : start + len(block)] = (block.reshape(len(block), -1) - rest) @ basis.T * scale
         weights = solve_weights(gram, rhs, smoothness, ridge=RIDGE).astype(np.float32)
-        lip_error, face_error = fit_errors(anim, anim.frame_blocks(BLOCK_FRAMES), basis, weights,
+        every = -(-anim.num_frames // ERROR_FRAMES_MEASURED)
+        lip_error, face_error = fit_errors(anim, _every(anim, every), basis, weights[::every],
                                            np.asarray(lips, np.int64))
     return Fit(tuple(shapes.names), weights, shapes, lip_error / shapes.mm, face_error / shapes.mm)
 
@@ -179,15 +182,28 @@ def _norm(x: np.ndarray) -> float:
     return float(np.sqrt(np.vdot(x, x)))
 
 
+def _every(anim: Animation, every: int) -> Iterable[tuple[int, np.ndarray]]:
+    """Every `every`-th frame of `anim` as (first, block) pairs numbered among them (all frames when 1)."""
+    if every == 1:
+        return anim.frame_blocks(BLOCK_FRAMES)
+    if isinstance(anim.vertices, FrameStream):
+        return anim.vertices.every(every).blocks(BLOCK_FRAMES)
+    frames = anim.vertices[::every]
+    return ((s, np.asarray(frames[s:s + BLOCK_FRAMES], np.float32))
+            for s in range(0, len(frames), BLOCK_FRAMES))
+
+
 def fit_errors(anim: Animation, blocks: Iterable[tuple[int, np.ndarray]], basis: np.ndarray,
                weights: np.ndarray,
                lips: np.ndarray) -> tuple[float, float]:
     """Mean per-vertex distance (mesh units) between the posed weights (`basis` [K, 3V] in mesh units) and the
-    animation's frames (`blocks` as `anim.frame_blocks()` yields them) over all frames: on the `lips`
-    vertices and on the whole face."""
+    animation's frames (`blocks` as `anim.frame_blocks()` yields them; `weights`: those frames' weights) over
+    the frames given: on the `lips` vertices and on the whole face."""
     rest = np.asarray(anim.template, np.float32).reshape(-1)
     lip_sum = face_sum = 0.0
+    count = 0
     for start, block in blocks:
+        count += len(block)
         # a few frames at a time: the residual stays in cache
         for first in range(0, len(block), ERROR_FRAMES):
             frames = block[first : first + ERROR_FRAMES]
@@ -198,4 +214,4 @@ def fit_errors(anim: Animation, blocks: Iterable[tuple[int, np.ndarray]], basis:
             dist = np.sqrt(np.einsum("tvc,tvc->tv", residual, residual))
             lip_sum += float(dist[:, lips].sum(dtype=np.float64))
             face_sum += float(dist.sum(dtype=np.float64))
-    return lip_sum / (anim.num_frames * len(lips)), face_sum / (anim.num_frames * anim.num_vertices)
+    return lip_sum / (max(count, 1) * len(lips)), face_sum / (max(count, 1) * anim.num_vertices)
