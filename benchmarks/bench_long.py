@@ -22,6 +22,7 @@ shared machine); outputs are deleted after each command (a 2-hour .npy takes 50 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -123,12 +124,22 @@ def run(args: list[str], timeout: float, limit_mb: float, log: Path) -> tuple[in
     after `timeout` s or above `limit_mb` (its stderr in `log`)."""
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", _MEASURE, str(timeout), str(limit_mb), str(log), *args],
-                          capture_output=True, text=True, cwd=REPO, env=dict(os.environ, HF_HUB_OFFLINE="1"),
-                          check=False)
+                          capture_output=True, text=True, cwd=REPO,
+                          env=dict(os.environ, HF_HUB_OFFLINE="1", FACEGEN_PROFILE="1"), check=False)
     wall = time.perf_counter() - start
     family, own = (float(x) for x in done.stdout.split()) if done.stdout.strip() else (0.0, 0.0)
     lines = [line for line in log.read_text(errors="replace").splitlines() if len(line) < 2000]
-    return done.returncode, wall, family, own, lines[-1] if lines else "(no message)"
+    said = [line for line in lines if not line.startswith('{"facegen_profile"')]
+    return done.returncode, wall, family, own, said[-1] if said else "(no message)"
+
+
+def stages(log: Path) -> str:
+    """The stages' seconds from the command's FACEGEN_PROFILE line (facegen.runtime.PROFILE)."""
+    for line in reversed(log.read_text(errors="replace").splitlines()):
+        if line.startswith('{"facegen_profile"'):
+            found = json.loads(line)["facegen_profile"]
+            return ", ".join(f"{k} {v:.0f}" for k, v in found.items() if v >= 1)
+    return ""
 
 
 def commands(wav: Path, txt: Path, out: Path) -> dict[str, list[str]]:
@@ -174,8 +185,7 @@ def main() -> None:
         ok = code == 0 and own <= 1536 and args.seconds / wall >= 5
         print(f"{name:<12} {code:>4} {wall:>8.1f} {args.seconds / wall:>7.1f} {family:>8.0f} {own:>7.0f}  "
               f"{'ok' if ok else 'MISSED'}  load {os.getloadavg()[0]:.2f}", flush=True)
-        if code != 0:
-            print(f"   {said}", flush=True)
+        print(f"   {said if code else stages(out / f'{name}.log')}", flush=True)
         for output in out.glob("[tn].*"):  # a 2-hour .npy takes 50 GB
             output.unlink()
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import bisect
 import json
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -164,17 +165,29 @@ def test_arkit_json_in_parts_is_json_dumps():
     assert text == json.dumps(doc, separators=(",", ":")) + "\n"
 
 
+_HEAR_WITH_HELPER = """
+import pickle, sys
+from facegen import audio, recognition
+recognition.HELPER_SECONDS = 20.0  # the second half in a forked helper
+made, start = [], recognition._helper
+recognition._helper = lambda *args: made.append(start(*args)) or made[-1]
+heard = recognition.hear(*audio.load_audio(sys.argv[1]))
+sys.stdout.buffer.write(pickle.dumps((heard, made[0] is not None)))
+"""
+
+
 @pytest.mark.slow
-def test_long_audio_is_heard_in_pieces_with_phones(speech, monkeypatch):
+def test_long_audio_is_heard_in_pieces_with_phones(speech):
     from facegen import recognition
 
     wav, _, seconds = speech
     samples, rate = audio.load_audio(wav)
     heard = recognition.hear(samples, rate)  # 150 s: all here
-    monkeypatch.setattr(recognition, "HELPER_SECONDS", 20.0)  # the second half in a forked helper
-    helpers, start = [], recognition._helper
-    monkeypatch.setattr(recognition, "_helper", lambda *args: helpers.append(start(*args)) or helpers[-1])
-    assert recognition.hear(samples, rate) == heard and helpers[0] is not None  # pieces do not depend on
+    # the helper in a new process: no fork while another test's threads linger here (hear would not fork)
+    done = subprocess.run([sys.executable, "-c", _HEAR_WITH_HELPER, str(wav)], capture_output=True, cwd=REPO,
+                          env=dict(os.environ, HF_HUB_OFFLINE="1"), check=True)
+    helped, forked = pickle.loads(done.stdout)
+    assert helped == heard and forked  # pieces do not depend on
     # each other (every pass in steps: a whole-utterance pass would change the next piece's words)
     assert seconds > recognition.LONG_SECONDS and len(heard.words) > 100 and heard.phones
     starts = [w.start for w in heard.words]
@@ -189,15 +202,15 @@ def test_long_audio_is_heard_in_pieces_with_phones(speech, monkeypatch):
 
 
 def _stop_at(command: list[str], folder: Path, ready) -> tuple[int, float, list[str]]:
-    """Run `command`; once `ready(stderr lines so far, folder)` holds, send SIGTERM: (exit code, seconds from
-    the signal to the exit, the stderr lines said after it). The process runs in a session of its own, so
-    that any process it left behind is found by its session."""
+    """Run `command`; once `ready(stderr lines so far, folder, its pid)` holds, send SIGTERM: (exit code,
+    seconds from the signal to the exit, the stderr lines said after it). The process runs in a session of
+    its own, so that any process it left behind is found by its session."""
     proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True,
                             env=dict(os.environ, HF_HUB_OFFLINE="1"))
     lines: list[str] = []
     os.set_blocking(proc.stderr.fileno(), False)
     deadline = time.monotonic() + 300
-    while not ready(lines, folder):
+    while not ready(lines, folder, proc.pid):
         assert proc.poll() is None, f"it ended before the stage: {lines[-3:]}"
         assert time.monotonic() < deadline, f"the stage never came: {lines[-3:]}"
         lines += [line.rstrip("\n") for line in proc.stderr.readlines()]
@@ -222,7 +235,7 @@ def _said(text: str, after: float = 0.0):
     """Ready `after` seconds once a stderr line holds `text`."""
     seen: dict[Path, float] = {}
 
-    def ready(lines: list[str], folder: Path) -> bool:
+    def ready(lines: list[str], folder: Path, _pid: int) -> bool:
         if folder not in seen and any(text in line for line in lines):
             seen[folder] = time.monotonic()
         return folder in seen and time.monotonic() >= seen[folder] + after
@@ -230,25 +243,41 @@ def _said(text: str, after: float = 0.0):
     return ready
 
 
-def _after(seconds: float):
-    """Ready `seconds` after the start (the forked aligner runs from the start; nothing says so)."""
+def _forked(seconds: float):
+    """Ready `seconds` after the command has a child process (the forked aligner; nothing says so)."""
     started: dict[Path, float] = {}
 
-    def ready(_lines: list[str], folder: Path) -> bool:
+    def ready(_lines: list[str], folder: Path, pid: int) -> bool:
+        if folder not in started:
+            children = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True,
+                                      text=True, check=False).stdout
+            if not children.strip():
+                return False
+            started[folder] = time.monotonic()
+        return time.monotonic() >= started[folder] + seconds
+
+    return ready
+
+
+def _after(seconds: float):
+    """Ready `seconds` after the start."""
+    started: dict[Path, float] = {}
+
+    def ready(_lines: list[str], folder: Path, _pid: int) -> bool:
         return time.monotonic() >= started.setdefault(folder, time.monotonic()) + seconds
 
     return ready
 
 
-def _writing(lines: list[str], folder: Path) -> bool:
+def _writing(_lines: list[str], folder: Path, _pid: int) -> bool:
     """Ready once the output's temporary files exist."""
     return any(TEMP_MARK in p.name for p in folder.iterdir())
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "command", "ready"), [
-    ("aligning (the forked aligner)", ["animate", "-o", "a.json", "--text-file"], _after(6.0)),
-    ("aligning (in the process)", ["align", "-o", "words.json", "--text-file"], _after(4.0)),
+    ("aligning (the forked aligner)", ["animate", "-o", "a.json", "--text-file"], _forked(2.0)),
+    ("aligning (in the process)", ["align", "-o", "words.json", "--text-file"], _after(6.0)),
     ("recognising", ["animate", "-o", "r.json"], _said("recognising the words", 2.0)),
     ("the ARKit fit", ["animate", "-o", "f.json", "--text-file"], _said("inference for", 2.5)),
     ("writing the .npy", ["animate", "-o", "w.npy", "--text-file"], _writing),
