@@ -272,8 +272,8 @@ class Animator:
         (inference.py)."""
         from facegen.inference import frame_stream
 
-        return [frame_stream(self.bundle, st, t) for st, t in zip(self.states(inputs), templates,
-                                                                  strict=True)]
+        return [frame_stream(self.bundle, st, t, speaker=c.speaker)
+                for st, t, c in zip(self.states(inputs), templates, inputs, strict=True)]
 
     def offsets(self, item: NetworkInput) -> np.ndarray:
         """The vertex offsets [T, V, 3] float32 of one input (evaluation against ground truth)."""
@@ -314,7 +314,8 @@ class Animator:
             for i, states in zip(ids, self.states([clips[i] for i in ids]), strict=True):
                 clip = clips[i]  # at another frame rate: the states resampled (a no-op at the network's)
                 states = states_at_rate(states, fps, clip.fps or fps, output_frames(clip))
-                out[i] = self.animation(clip, frame_stream(self.bundle, states, clip.mesh.vertices))
+                out[i] = self.animation(clip, frame_stream(self.bundle, states, clip.mesh.vertices,
+                                                             speaker=clip.speaker))
         return out
 
     def animation(self, clip: Clip, vertices) -> Animation:

@@ -25,6 +25,7 @@ each saved and released; a single USD layer keeps every authored sample until it
 from __future__ import annotations
 
 import contextlib
+import weakref
 from collections.abc import Iterator, Sequence
 
 import numpy as np
@@ -327,11 +328,40 @@ def states_at_rate(states, fps_in: float, fps_out: float, frames: int):
     return out
 
 
+REST_SECONDS = 3.0  # of quiet noise: the network's answer to silence (`rest_offsets`)
+REST_DBFS = -50.0  # a quiet room (the network answers -60 to -30 dBFS alike; digital silence not)
+_REST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # model -> {speaker: offsets}
+
+
+def rest_offsets(bundle, speaker: int = 0) -> np.ndarray:
+    """The offsets [3V] float32 the network gives in silence for `speaker` (no words, quiet noise): its rest.
+
+    The rig the network learns from rests exactly on the template, but a network only comes close: the
+    shipped one holds the lips a fraction of a millimetre pursed in silence, which a 52-shape fit reads as
+    mouthFunnel 0.06-0.14, mouthPucker, mouthPress (issue 24). `frame_stream` subtracts this, so silence
+    is the template in every format, as an idle clip is. Computed once per model and speaker (~20 ms)."""
+    from facegen.audio import mel_features
+
+    cached = _REST.setdefault(bundle.model, {})
+    if speaker not in cached:
+        cfg = bundle.features
+        noise = np.random.default_rng(0).standard_normal(int(REST_SECONDS * cfg.sample_rate))
+        mel = mel_features((noise * 10 ** (REST_DBFS / 20)).astype(np.float32), cfg.sample_rate, cfg,
+                           bundle.mel_filters)
+        states = decoder_states(bundle, mel, None, speaker).float().cpu().numpy()
+        weight, bias = bundle.model.output_layer()
+        middle = states[len(states) // 3: 2 * len(states) // 3].mean(0)  # away from the clip's edges
+        cached[speaker] = (weight.detach().cpu().float().numpy() @ middle
+                           + bias.detach().cpu().float().numpy()).astype(np.float32)
+    return cached[speaker]
+
+
 def frame_stream(bundle, states, template: np.ndarray | None = None,
-                 block_frames: int = BLOCK_FRAMES) -> FrameStream:
-    """Frames = template + offsets from decoder `states` (template None: offsets only)."""
+                 block_frames: int = BLOCK_FRAMES, *, speaker: int = 0) -> FrameStream:
+    """Frames = template + offsets from decoder `states` (template None: offsets only), the offsets taken
+    from the network's rest for `speaker` (`rest_offsets`)."""
     weight, bias = bundle.model.output_layer()
-    base = bias.detach().cpu().numpy().astype(np.float32)
+    base = bias.detach().cpu().numpy().astype(np.float32) - rest_offsets(bundle, speaker)
     if template is not None:
         base = base + np.asarray(template, np.float32).reshape(-1)
     return FrameStream(states, weight, base, block_frames)
@@ -343,4 +373,4 @@ def predict_frames(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: in
     """The clip's vertex positions (template + offsets; offsets alone when `template` is None) as a
     FrameStream: the decoder states are computed now, the output frames when they are read."""
     states = decoder_states(bundle, mel, text, speaker, device=device, phones=phones)
-    return frame_stream(bundle, states, template, block_frames)
+    return frame_stream(bundle, states, template, block_frames, speaker=speaker)

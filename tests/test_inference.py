@@ -19,7 +19,7 @@ from helpers import make_bundle
 from facegen.animator import Animator
 from facegen.batch import Job, animate_many, read_manifest
 from facegen.errors import FacegenError
-from facegen.inference import FrameStream, decoder_states, frame_stream, predict_frames
+from facegen.inference import FrameStream, decoder_states, frame_stream, predict_frames, rest_offsets
 from facegen.model import one_hot
 from facegen.runtime import Reporter, select_device
 
@@ -68,12 +68,12 @@ def one_pass(bundle, mel, text, speaker) -> np.ndarray:
 def test_blockwise_equals_one_pass_at_seams(bundle, face):
     T = 640
     mel, text = features(T)
-    ref = face.vertices[None] + one_pass(bundle, mel, text, 1)
+    ref = face.vertices[None] + one_pass(bundle, mel, text, 1) - rest_offsets(bundle, 1).reshape(-1, 3)
     motion = np.linalg.norm(ref - face.vertices[None], axis=-1).max() / face.size
     assert motion > 0.01, f"the test model must move the face (largest offset {motion:.3g} of its size)"
 
     states = decoder_states(bundle, mel, text, 1, fusion_frames=96)  # fusion blocks end at 96, 192, ...
-    frames = frame_stream(bundle, states, face.vertices, block_frames=128)  # output blocks at 128, 256, ...
+    frames = frame_stream(bundle, states, face.vertices, block_frames=128, speaker=1)  # blocks at 128, 256..
     got = np.asarray(frames)
     assert got.shape == (T, face.num_vertices, 3) and got.dtype == np.float32
     err = np.linalg.norm(got - ref, axis=-1).max(axis=1) / face.size  # per frame, relative to the face size
@@ -96,9 +96,10 @@ def test_default_model_blockwise_equals_one_pass(clips):
     mel = mel_features(*load_audio(wav), bundle.features, bundle.mel_filters)
     mel = np.concatenate([mel] * 4)  # ~15 s: several blocks
     text = features(len(mel), seed=2)[1] * 0.3
-    ref = bundle.template.vertices[None] + one_pass(bundle, mel, text, 2)
+    rest = rest_offsets(bundle, 2).reshape(-1, 3)
+    ref = bundle.template.vertices[None] + one_pass(bundle, mel, text, 2) - rest
     states = decoder_states(bundle, mel, text, 2, fusion_frames=50)
-    got = np.asarray(frame_stream(bundle, states, bundle.template.vertices, block_frames=64))
+    got = np.asarray(frame_stream(bundle, states, bundle.template.vertices, block_frames=64, speaker=2))
     err = np.linalg.norm(got - ref, axis=-1).max() / bundle.template.size
     motion = np.linalg.norm(ref - bundle.template.vertices, axis=-1).max() / bundle.template.size
     print(f"default model, {len(mel)} frames: largest difference {err:.2e} of the face size (motion "
@@ -312,3 +313,27 @@ def test_profile_env_prints_stage_timings(bundle, clips, tmp_path):
             "inference", "writing"} <= set(stages)
     assert all(v >= 0 for v in stages.values()) and stages["writing"] > 0
     assert report["max_rss_mb"] > 100
+
+
+def test_silence_is_the_template(tmp_path):
+    """The shipped network's answer to a quiet room is taken as its rest (rest_offsets): silence animates
+    as the template, whose ARKit weights are all ~0 (it held mouthFunnel 0.06-0.14 before; issue 24)."""
+    import soundfile as sf
+
+    from facegen.animator import animate
+    from facegen.arkit.solve import fit_arkit
+    from facegen.bundle import load_bundle
+
+    bundle = load_bundle()
+    rng = np.random.default_rng(3)
+    lips = bundle.template.regions["lips"]
+    for db in (-55.0, -45.0):  # room noise at other levels than the one rest_offsets uses
+        path = tmp_path / f"room{-db:.0f}.wav"
+        sf.write(path, (rng.standard_normal(64000) * 10 ** (db / 20)).astype(np.float32), 16000)
+        anim = animate(path, no_text=True, bundle=bundle)
+        fit = fit_arkit(anim)
+        moved = np.linalg.norm(np.asarray(anim.vertices)[:, lips] - bundle.template.vertices[lips], axis=-1)
+        assert np.median(moved) / fit.shapes.mm < 0.3, db  # mm
+        assert fit.weights.mean(0).max() < 0.04, (db, dict(zip(fit.names, fit.weights.mean(0).round(3))))
+    offsets = rest_offsets(bundle, 0)
+    assert offsets.shape == (bundle.template.vertices.size,) and offsets is rest_offsets(bundle, 0)

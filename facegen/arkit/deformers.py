@@ -19,6 +19,12 @@ LOOK_SIDE, LOOK_UP, LOOK_DOWN = 0.52, 0.42, 0.45  # eye rotation (rad) at eyeLoo
 EYE_ROTATED_DEG, EYE_FIXED_DEG = 45.0, 85.0  # the eyeball cap turns fully inside, not at all at its rim
 SMILE_GAIN = 1.35  # mouthSmile = the rig's smile (the mouth-corner part of cheek_raise) times this
 PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind the eyeball centres
+# ARKit's jawOpen 1 is the mouth opened as wide as it goes (Apple's reference pose); the rig's jaw_open 1
+# parts the lips by 2.0 cm, about half of an adult's opening (maximal opening between the incisors
+# 40-60 mm). So jawOpen (and mouthClose, the lips shut against that jaw) is the rig's offset at jaw_open 1
+# times this: a weight means what an iPhone's does (against a real capture facegen's jawOpen range was
+# 1.86x the iPhone's; docs/arkit_capture.md). Linear, as every blend shape is: jawOpen 0.5 is jaw_open 1.
+JAW_OPEN_SCALE = 2.0
 
 
 def _smoothstep(t: np.ndarray) -> np.ndarray:
@@ -129,12 +135,12 @@ def _eyes(d: _Deformers, out: dict[str, np.ndarray]) -> None:
 
 def _jaw(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     jaw = d.f["jaw"]
-    out["jawOpen"] = d.delta(jaw_open=1.0)
+    out["jawOpen"] = JAW_OPEN_SCALE * d.delta(jaw_open=1.0)
     out["jawForward"] = d.vec(dy=-0.08 * jaw, dz=0.6 * jaw)
     out["jawLeft"] = d.vec(dx=0.65 * jaw)
     out["jawRight"] = d.vec(dx=-0.65 * jaw)
     # ARKit's mouthClose: the lips closed against an open jaw
-    out["mouthClose"] = d.pose(jaw_open=1.0, lip_close=1.0) - d.pose(jaw_open=1.0)
+    out["mouthClose"] = JAW_OPEN_SCALE * (d.pose(jaw_open=1.0, lip_close=1.0) - d.pose(jaw_open=1.0))
     # no tongue on this face: the small jaw drop and the lips parting a tongue pushed out would cause
     w_lo = d.field(d.f["d_lo"], 2.0, ~d.f["upper_side"])
     # no tongue on this face: the lower lip pushed out and down as a tongue over it would (no jaw: that is
