@@ -26,6 +26,7 @@ import numpy as np
 from facegen.align_ahead import AlignAhead, Aligned
 from facegen.animation import Animation
 from facegen.audio import check_speech, is_silent, load_audio, mel_features, num_frames
+from facegen.blinks import DEFAULT_RATE, check_blink_rate, check_seed
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh, check_topology, read_mesh
 from facegen.runtime import PROFILE, SILENT, Reporter, select_device, silent
@@ -66,6 +67,9 @@ class Clip(NetworkInput):
     directions: tuple[str, ...] = ()  # the transcript's stage directions ("(laughs)", "[beep]"): not aligned
     match: Match | None = None  # how well the transcript matches the speech (forced alignment only)
     confidences: list[float] | None = None  # of each recognised word (recognition only)
+    blink_rate: float = DEFAULT_RATE  # blinks per minute (0: none; facegen.blinks)
+    seed: int = 0  # of the random layers (blinks)
+    blinks: list | None = None  # the blinks made for it (facegen.blinks.Blink), once run
 
 
 class Animator:
@@ -169,17 +173,20 @@ class Animator:
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
                 fps: float | None = None, reporter: Reporter = SILENT, aligned: Aligned | None = None,
-                meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error") -> Clip:
+                meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
+                blink_rate: float = DEFAULT_RATE, seed: int = 0) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
         words, not their times) and `meanwhile` is called (e.g. to import the writer's libraries)."""
+        blink_rate, seed = check_blink_rate(blink_rate), check_seed(seed)
         ahead = self._take_ahead(audio, text) or aligned
         try:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                  template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile,
                                  on_mismatch=on_mismatch)
             clip.fps = check_fps(fps)
+            clip.blink_rate, clip.seed = blink_rate, seed
             if text:
                 from facegen.words import split_directions
 
@@ -306,17 +313,33 @@ class Animator:
         for i, clip in enumerate(clips):
             if clip.idle:  # the template in every frame: a stream of no states and no weights
                 vertices = clip.mesh.vertices
-                out[i] = self.animation(clip, FrameStream(np.zeros((output_frames(clip), 1), np.float32),
-                                                          np.zeros((vertices.size, 1), np.float32), vertices))
+                out[i] = self.animation(clip, self.layered(clip, FrameStream(
+                    np.zeros((output_frames(clip), 1), np.float32), np.zeros((vertices.size, 1), np.float32),
+                    vertices)))
         order = sorted((i for i, c in enumerate(clips) if not c.idle), key=lambda i: clips[i].num_frames)
         for b in range(0, len(order), batch_size):
             ids = order[b:b + batch_size]
             for i, states in zip(ids, self.states([clips[i] for i in ids]), strict=True):
                 clip = clips[i]  # at another frame rate: the states resampled (a no-op at the network's)
                 states = states_at_rate(states, fps, clip.fps or fps, output_frames(clip))
-                out[i] = self.animation(clip, frame_stream(self.bundle, states, clip.mesh.vertices,
-                                                             speaker=clip.speaker))
+                out[i] = self.animation(clip, self.layered(clip, frame_stream(
+                    self.bundle, states, clip.mesh.vertices, speaker=clip.speaker)))
         return out
+
+    def layered(self, clip: Clip, stream):
+        """The network's frames of `clip` with the layers it cannot predict: blinks timed by the speech
+        (facegen.blinks), whose times go in the metadata (`animation`)."""
+        from facegen.blinks import blink_curve, blink_offsets, blink_times, quiet_spans
+
+        clip.blinks = []
+        shut = blink_offsets(clip.mesh) if clip.blink_rate else None
+        if shut is None:
+            return stream
+        duration = len(clip.samples) / clip.sample_rate
+        clip.blinks = blink_times(duration, quiet_spans(clip.samples, clip.sample_rate), clip.blink_rate,
+                                  clip.seed)
+        curve = blink_curve(clip.blinks, len(stream), clip.fps or self.bundle.features.fps)
+        return stream.with_layers(curve[:, None], shut[None]) if clip.blinks else stream
 
     def animation(self, clip: Clip, vertices) -> Animation:
         """The Animation of a prepared clip with its computed frames (an array or a FrameStream)."""
@@ -340,6 +363,8 @@ class Animator:
                 "word_timing": clip.word_timing,
                 **({"stage_directions": list(clip.directions)} if clip.directions else {}),
                 **({"transcript_match": clip.match.as_dict()} if clip.match is not None else {}),
+                "blinks": {"rate_per_minute": clip.blink_rate, "seed": clip.seed,
+                           "times": [[b.start, b.duration] for b in clip.blinks or []]},
             },
         )
 
@@ -349,7 +374,8 @@ class Animator:
                 alignment: str | os.PathLike | None = None, no_text: bool = False,
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
                 fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
-                meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error") -> Animation:
+                meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
+                blink_rate: float = DEFAULT_RATE, seed: int = 0) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
@@ -358,7 +384,7 @@ class Animator:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                 template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
-                                on_mismatch=on_mismatch)
+                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -373,7 +399,8 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             no_text: bool = False, speaker: str | int | None = None, bundle=None,
             template: str | os.PathLike | Mesh | None = None, text_model: str | None = None,
             device: str = "auto", fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
-            meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error") -> Animation:
+            meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
+            blink_rate: float = DEFAULT_RATE, seed: int = 0) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -391,10 +418,13 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     `on_mismatch`: a transcript that does not match the speech is refused ("error", a FacegenError) or
     animated with a note ("warn"); either way the metadata's "transcript_match" holds its score
     (facegen.transcript_match.Match: 1 sure, below 0.5 a mismatch).
+    `blink_rate`: blinks per minute (0: none), timed by the speech (facegen.blinks: more at pauses and
+    phrase ends, never periodic); `seed`: their random draws (the same inputs and seed: the same frames).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
-        stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch)
+        stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch, blink_rate=blink_rate,
+        seed=seed)
 
 
 MAX_FPS = 240.0  # output frames per second at most

@@ -23,6 +23,7 @@ import numpy as np
 
 from facegen.align_ahead import Aligned
 from facegen.animator import BATCH_SIZE, Animator
+from facegen.blinks import DEFAULT_RATE
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension, write_animation
 from facegen.input_files import MANIFEST_BYTES, TRANSCRIPT_BYTES, read_input_text
@@ -54,6 +55,8 @@ class Job:
     manifest: Path | None = None
     fps: float | None = None  # the output frame rate (None: the model's)
     on_mismatch: str = "error"  # a transcript not matching its speech: refused, or animated and flagged
+    blink_rate: float = DEFAULT_RATE  # blinks per minute (facegen.blinks)
+    seed: int = 0  # of the random layers
     options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
 
     @property
@@ -357,7 +360,8 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                 prepared[i] = animator.prepare(job.audio, text=job.text, alignment=job.alignment,
                                                no_text=job.no_text, speaker=job.speaker, fps=job.fps,
                                                reporter=SILENT.noting(note), aligned=job.aligned,
-                                               on_mismatch=job.on_mismatch)
+                                               on_mismatch=job.on_mismatch, blink_rate=job.blink_rate,
+                                               seed=job.seed)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error

@@ -17,6 +17,7 @@ from pathlib import Path
 from facegen.batch import Job, JobResult, read_manifest
 from facegen.batch_plan import RunState, check_plan, file_hash, item_key
 from facegen.batch_report import summary_line, write_reports
+from facegen.blinks import DEFAULT_RATE, check_blink_rate, check_seed
 from facegen.engines import ENGINES, check_ray, run_local, run_ray
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension
@@ -60,7 +61,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  ray_address: str | None = None, model: str | os.PathLike | None = None,
                  text_model: str | None = None, device: str = "auto", batch_size: int = 16,
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
-                 on_mismatch: str = "error",
+                 on_mismatch: str = "error", blink_rate: float = DEFAULT_RATE, seed: int = 0,
                  on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
@@ -70,7 +71,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     `force`: redo unchanged items too; `fps`: every item's frame rate (None: the model's); `usd_mode`:
     "points" or "blendshapes" for every USD target (None: the writer's default, points); `on_mismatch`:
     "error" refuses a line whose transcript does not match its speech, "warn" writes it and flags it in
-    the reports (each item's "match" holds its score either way: facegen.transcript_match).
+    the reports (each item's "match" holds its score either way: facegen.transcript_match); `blink_rate`
+    and `seed`: every item's blinks (facegen.blinks).
     `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
     ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
@@ -86,6 +88,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     from facegen.transcript_match import ON_MISMATCH
 
     check_fps(fps)
+    blink_rate, seed = check_blink_rate(blink_rate), check_seed(seed)
     if on_mismatch not in ON_MISMATCH:
         raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
                            param="on_mismatch")
@@ -98,6 +101,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     for job in all_jobs:  # workers may run anywhere (Ray): absolute inputs
         job.fps = fps
         job.on_mismatch = on_mismatch
+        job.blink_rate, job.seed = blink_rate, seed
         job.options = {"mode": usd_mode} if usd_mode else {}
         job.audio = Path(os.path.abspath(job.audio))
         job.alignment = Path(os.path.abspath(job.alignment)) if job.alignment is not None else None
@@ -111,6 +115,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     options = {"model": _model_hash(model_path), "text_model": text_model}
     if fps is not None or usd_mode is not None:  # (absent when unset: an earlier run's items stay unchanged)
         options |= {"fps": fps, "usd_mode": usd_mode}
+    if (blink_rate, seed) != (DEFAULT_RATE, 0):
+        options |= {"blinks": [blink_rate, seed]}
     state = RunState.load(out)
     results: dict[int, JobResult] = {}
     keys: dict[int, str] = {}

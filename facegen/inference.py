@@ -237,6 +237,24 @@ class FrameStream:
         for s in range(start, stop, size):
             yield s, self.compute(s, min(s + size, stop))
 
+    def with_layers(self, curves: np.ndarray, offsets: np.ndarray) -> FrameStream:
+        """This stream plus layers: frame t gains sum_k curves[t, k] * offsets[k] (`curves` [T, K], `offsets`
+        [K, 3V]), e.g. blinks. The layers join the output layer as K more states and weights, so `project`,
+        `every` and the blocks see them as they see the network's motion."""
+        curves = np.asarray(curves, np.float32).reshape(len(self), -1)
+        offsets = np.asarray(offsets, np.float32).reshape(curves.shape[1], -1)
+        if self._torch:
+            import torch
+
+            device = self._states.device
+            states = torch.cat([self._states, torch.from_numpy(curves).to(device)], 1)
+            weight = torch.cat([self._weight, torch.from_numpy(offsets.T.copy()).to(device)], 1)
+            base = self._base.cpu().numpy()
+        else:
+            states = np.concatenate([self._states, curves], 1)
+            weight, base = np.concatenate([self._weight, offsets.T], 1), self._base
+        return FrameStream(states, weight, base, self.block_frames)
+
     def every(self, step: int) -> FrameStream:
         """The stream of every `step`-th frame (the same weights; its states a copy of theirs)."""
         return FrameStream(self._states[::step], self._weight, self._base, self.block_frames)

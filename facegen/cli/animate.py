@@ -56,24 +56,31 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--on-mismatch", type=click.Choice(["error", "warn"]), default="error", show_default=True,
               help="A transcript that does not match the speech: refuse it, or animate with a warning (the "
                    "metadata's transcript_match holds the score either way).")
+@click.option("--blink-rate", type=FiniteRange(0, 120), default=17.0, show_default=True, metavar="PER_MIN",
+              help="Blinks per minute, timed by the speech (more at pauses and phrase ends); 0 = none.")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
+              help="Seed of the random layers (blinks): the same inputs and seed give the same files.")
 @click.option("--preview", type=click.Path(dir_okay=False),
               help="Also render a preview video (.mp4) with sound.")
 @click.option("--device", type=DEVICE, default="auto", show_default=True,
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet):
+            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed, preview,
+            device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
     one_of(text=text, text_file=text_file, alignment=alignment, no_text=no_text)
     with output_folders(output, preview):  # made as needed, removed again when nothing is written
         _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-                 usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet)
+                 usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet,
+                 blink_rate=blink_rate, seed=seed)
 
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet):
+             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
+             blink_rate, seed):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
@@ -102,7 +109,8 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     # plan.streams: the writer reads frames block by block, no [T, V, 3] array in memory
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
                             template=template, fps=fps, stream=plan.streams, reporter=reporter,
-                            meanwhile=plan.import_writer, on_mismatch=on_mismatch)
+                            meanwhile=plan.import_writer, on_mismatch=on_mismatch, blink_rate=blink_rate,
+                            seed=seed)
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it

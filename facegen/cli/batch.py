@@ -40,9 +40,13 @@ from facegen.cli.options import DEVICE, FiniteRange
 @click.option("--on-mismatch", type=click.Choice(["error", "warn"]), default="error", show_default=True,
               help="A line whose transcript does not match its speech: an error, or written and flagged in "
                    "the reports (each item's match score is there either way).")
+@click.option("--blink-rate", type=FiniteRange(0, 120), default=17.0, show_default=True, metavar="PER_MIN",
+              help="Blinks per minute in every line, timed by its speech; 0 = none.")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
+              help="Seed of the random layers (blinks): a rerun gives the same files.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model, text_model, device,
-          batch_size, ext, usd_mode, fps, on_mismatch, quiet):
+          batch_size, ext, usd_mode, fps, on_mismatch, blink_rate, seed, quiet):
     """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment,
     speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
     are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed.
@@ -62,7 +66,7 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
         outcome = run_manifest(manifest, output_dir, jobs=jobs, formats=formats, force=force, engine=engine,
                                ray_address=ray_address, model=model, text_model=text_model, device=device,
                                batch_size=batch_size, default_ext=ext, fps=fps, usd_mode=usd_mode,
-                               on_mismatch=on_mismatch,
+                               on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed,
                                on_plan=planned,
                                on_result=lambda _r: bars and bars[0].update(1))
     finally:

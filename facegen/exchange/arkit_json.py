@@ -73,6 +73,7 @@ def _document(anim: Animation, fit: Fit, track: str) -> Iterator[str]:
             "lip_error_mm": round(fit.lip_error_mm, 4),
             "face_error_mm": round(fit.face_error_mm, 4),
             "audio": track or None,
+            **({"blinks": anim.metadata["blinks"]} if "blinks" in anim.metadata else {}),
         },
     }
     head, tail = json.dumps(doc, separators=(",", ":")).split('"weightMat":[]')
