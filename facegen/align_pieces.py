@@ -38,15 +38,16 @@ MAX_EDGE = 40  # frames the first word's start and the last word's end may move 
 MAX_SEARCH = 6000  # frames of the longest search: a piece that fails is joined with the next up to this
 
 
-def loud_frames(audio: np.ndarray, n_frames: int) -> np.ndarray:
-    """Frames (10 ms step, 25 ms window) clearly louder than the recording's noise floor."""
-    win = int(0.025 * RATE)
+def loud_frames(audio: np.ndarray, n_frames: int, rate: int = RATE) -> np.ndarray:
+    """Frames (10 ms step, 25 ms window) clearly louder than the recording's noise floor (`audio` at
+    `rate` Hz)."""
+    win, hop = int(0.025 * rate), rate // 100
     energy = np.empty(n_frames)
     for s in range(0, n_frames, 1 << 14):  # a block of frames at a time: 2 h of them are 2.3 GB as float64
         e = min(s + (1 << 14), n_frames)
-        under = audio[s * HOP:(e - 1) * HOP + win]  # the samples under them, zeros past the end
-        under = np.pad(under, (0, (e - 1 - s) * HOP + win - len(under)))
-        block = np.lib.stride_tricks.sliding_window_view(under, win)[::HOP].astype(np.float64)
+        under = audio[s * hop:(e - 1) * hop + win]  # the samples under them, zeros past the end
+        under = np.pad(under, (0, (e - 1 - s) * hop + win - len(under)))
+        block = np.lib.stride_tricks.sliding_window_view(under, win)[::hop].astype(np.float64)
         energy[s:e] = 10 * np.log10(np.mean(block ** 2, axis=1) + 1e-12)
     low, high = np.percentile(energy, 10), np.percentile(energy, 95)
     return energy > low + 0.5 * (high - low)

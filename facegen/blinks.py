@@ -74,14 +74,12 @@ def check_seed(seed: int) -> int:
 def quiet_spans(samples: np.ndarray, sample_rate: int) -> list[tuple[float, float]]:
     """(start, end) in seconds of the pauses of a recording: quiet audio of at least PAUSE_S (the edges of
     the clip included)."""
-    from facegen.align_pieces import RATE, loud_frames
-    from facegen.audio import resample
+    from facegen.align_pieces import loud_frames
 
-    audio = resample(np.asarray(samples, np.float32), sample_rate, RATE)
-    frames = len(audio) // (RATE // 100)
-    if frames < 3 or not np.any(audio):
+    frames = len(samples) // (sample_rate // 100)
+    if frames < 3 or not np.any(samples):
         return [(0.0, len(samples) / sample_rate)]
-    loud = loud_frames(audio, frames)
+    loud = loud_frames(samples, frames, sample_rate)  # at the clip's own rate: no copy of a long clip
     edges = np.flatnonzero(np.diff(np.concatenate([[1], loud.astype(np.int8), [1]])))
     return [(a / 100, b / 100) for a, b in zip(edges[::2], edges[1::2], strict=True)
             if (b - a) / 100 >= PAUSE_S]
