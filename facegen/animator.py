@@ -28,6 +28,7 @@ from facegen.animation import Animation
 from facegen.audio import check_speech, is_silent, load_audio, mel_features, num_frames
 from facegen.blinks import DEFAULT_RATE, check_blink_rate, check_seed
 from facegen.errors import FacegenError
+from facegen.expression import Emotion, parse_emotion
 from facegen.face.mesh import Mesh, check_topology, read_mesh
 from facegen.runtime import PROFILE, SILENT, Reporter, select_device, silent
 from facegen.transcript_match import Match
@@ -70,6 +71,7 @@ class Clip(NetworkInput):
     blink_rate: float = DEFAULT_RATE  # blinks per minute (0: none; facegen.blinks)
     seed: int = 0  # of the random layers (blinks)
     blinks: list | None = None  # the blinks made for it (facegen.blinks.Blink), once run
+    emotion: Emotion | None = None  # over the whole clip (facegen.expression)
 
 
 class Animator:
@@ -174,19 +176,20 @@ class Animator:
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
                 fps: float | None = None, reporter: Reporter = SILENT, aligned: Aligned | None = None,
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
-                blink_rate: float = DEFAULT_RATE, seed: int = 0) -> Clip:
+                blink_rate: float = DEFAULT_RATE, seed: int = 0,
+                emotion: str | Emotion | None = None) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
         words, not their times) and `meanwhile` is called (e.g. to import the writer's libraries)."""
-        blink_rate, seed = check_blink_rate(blink_rate), check_seed(seed)
+        blink_rate, seed, emotion = check_blink_rate(blink_rate), check_seed(seed), parse_emotion(emotion)
         ahead = self._take_ahead(audio, text) or aligned
         try:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                  template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile,
                                  on_mismatch=on_mismatch)
             clip.fps = check_fps(fps)
-            clip.blink_rate, clip.seed = blink_rate, seed
+            clip.blink_rate, clip.seed, clip.emotion = blink_rate, seed, emotion
             if text:
                 from facegen.words import split_directions
 
@@ -328,18 +331,26 @@ class Animator:
 
     def layered(self, clip: Clip, stream):
         """The network's frames of `clip` with the layers it cannot predict: blinks timed by the speech
-        (facegen.blinks), whose times go in the metadata (`animation`)."""
+        (facegen.blinks), whose times go in the metadata (`animation`), and the clip's emotion
+        (facegen.expression)."""
         from facegen.blinks import blink_curve, blink_offsets, blink_times, quiet_spans
+        from facegen.expression import emotion_offsets
 
+        curves, offsets = [], []
         clip.blinks = []
         shut = blink_offsets(clip.mesh) if clip.blink_rate else None
-        if shut is None:
-            return stream
-        duration = len(clip.samples) / clip.sample_rate
-        clip.blinks = blink_times(duration, quiet_spans(clip.samples, clip.sample_rate), clip.blink_rate,
-                                  clip.seed)
-        curve = blink_curve(clip.blinks, len(stream), clip.fps or self.bundle.features.fps)
-        return stream.with_layers(curve[:, None], shut[None]) if clip.blinks else stream
+        if shut is not None:
+            duration = len(clip.samples) / clip.sample_rate
+            clip.blinks = blink_times(duration, quiet_spans(clip.samples, clip.sample_rate), clip.blink_rate,
+                                      clip.seed)
+            if clip.blinks:
+                curves.append(blink_curve(clip.blinks, len(stream), clip.fps or self.bundle.features.fps))
+                offsets.append(shut)
+        mood = emotion_offsets(clip.emotion, clip.mesh)
+        if mood is not None:
+            curves.append(np.ones(len(stream), np.float32))
+            offsets.append(mood)
+        return stream.with_layers(np.stack(curves, 1), np.stack(offsets)) if curves else stream
 
     def animation(self, clip: Clip, vertices) -> Animation:
         """The Animation of a prepared clip with its computed frames (an array or a FrameStream)."""
@@ -365,6 +376,7 @@ class Animator:
                 **({"transcript_match": clip.match.as_dict()} if clip.match is not None else {}),
                 "blinks": {"rate_per_minute": clip.blink_rate, "seed": clip.seed,
                            "times": [[b.start, b.duration] for b in clip.blinks or []]},
+                **({"emotion": clip.emotion.as_dict()} if clip.emotion is not None else {}),
             },
         )
 
@@ -375,7 +387,8 @@ class Animator:
                 speaker: str | int | None = None, template: str | os.PathLike | Mesh | None = None,
                 fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
-                blink_rate: float = DEFAULT_RATE, seed: int = 0) -> Animation:
+                blink_rate: float = DEFAULT_RATE, seed: int = 0,
+                emotion: str | Emotion | None = None) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
@@ -384,7 +397,7 @@ class Animator:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                 template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
-                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed)
+                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed, emotion=emotion)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -400,7 +413,8 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             template: str | os.PathLike | Mesh | None = None, text_model: str | None = None,
             device: str = "auto", fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
             meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
-            blink_rate: float = DEFAULT_RATE, seed: int = 0) -> Animation:
+            blink_rate: float = DEFAULT_RATE, seed: int = 0,
+            emotion: str | Emotion | None = None) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -420,11 +434,13 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     (facegen.transcript_match.Match: 1 sure, below 0.5 a mismatch).
     `blink_rate`: blinks per minute (0: none), timed by the speech (facegen.blinks: more at pauses and
     phrase ends, never periodic); `seed`: their random draws (the same inputs and seed: the same frames).
+    `emotion`: "LABEL[:INTENSITY]" (facegen.expression.EMOTIONS: happy, sad, angry, surprised, afraid,
+    disgusted, neutral; intensity 0-1, default 1) over the whole clip, on top of what the words do.
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
         stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch, blink_rate=blink_rate,
-        seed=seed)
+        seed=seed, emotion=emotion)
 
 
 MAX_FPS = 240.0  # output frames per second at most

@@ -26,6 +26,7 @@ from facegen.animator import BATCH_SIZE, Animator
 from facegen.blinks import DEFAULT_RATE
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension, write_animation
+from facegen.expression import Emotion, parse_emotion
 from facegen.input_files import MANIFEST_BYTES, TRANSCRIPT_BYTES, read_input_text
 from facegen.runtime import SILENT, Reporter
 
@@ -57,6 +58,7 @@ class Job:
     on_mismatch: str = "error"  # a transcript not matching its speech: refused, or animated and flagged
     blink_rate: float = DEFAULT_RATE  # blinks per minute (facegen.blinks)
     seed: int = 0  # of the random layers
+    emotion: Emotion | None = None  # the row's 'emotion', else the run's (facegen.expression)
     options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
 
     @property
@@ -101,7 +103,7 @@ class JobResult:
         return "passed" if self.ok else "failed"
 
 
-MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output")
+MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output", "emotion")
 PATH_COLUMNS = ("audio", "text_file", "alignment", "output")
 MAX_SPEAKER_CHARS = 100  # a speaker's name or index
 ROW_DEPTH = 3  # brackets a JSON manifest nests: {"jobs": [{row}]}
@@ -293,6 +295,10 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
         size = f"a {len(speaker)}-digit number" if speaker.isdigit() else f"{len(speaker)} characters long"
         raise FacegenError(f"{where}: the speaker {speaker[:12]}... is {size}: give a speaker's name or "
                            "index")
+    try:
+        emotion = parse_emotion(row.get("emotion") or None)
+    except FacegenError as exc:
+        raise FacegenError(f"{where}: {exc}") from None
     given = [k for k in ("text", "text_file", "alignment") if row.get(k)]
     if len(given) > 1:
         raise FacegenError(f"{where}: give one of text, text_file or alignment, not {' and '.join(given)}")
@@ -318,7 +324,7 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
     return Job(audio=base / row["audio"], output=outputs[0] if outputs else out, text=text,
                alignment=base / row["alignment"] if row.get("alignment") else None,
                speaker=speaker, line=line, outputs=outputs, problem=problem, text_file=text_file,
-               manifest=path)
+               manifest=path, emotion=emotion)
 
 
 def animate_many(jobs: Iterable[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,
@@ -361,7 +367,7 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                                                no_text=job.no_text, speaker=job.speaker, fps=job.fps,
                                                reporter=SILENT.noting(note), aligned=job.aligned,
                                                on_mismatch=job.on_mismatch, blink_rate=job.blink_rate,
-                                               seed=job.seed)
+                                               seed=job.seed, emotion=job.emotion)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error

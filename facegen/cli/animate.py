@@ -60,14 +60,17 @@ from facegen.runtime import Reporter, say_stderr
               help="Blinks per minute, timed by the speech (more at pauses and phrase ends); 0 = none.")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="Seed of the random layers (blinks): the same inputs and seed give the same files.")
+@click.option("--emotion", metavar="LABEL[:INTENSITY]",
+              help="An emotion over the whole clip, on top of what the words do: neutral, happy, sad, angry, "
+                   "surprised, afraid or disgusted, intensity 0-1 (default 1), e.g. happy:0.6.")
 @click.option("--preview", type=click.Path(dir_okay=False),
               help="Also render a preview video (.mp4) with sound.")
 @click.option("--device", type=DEVICE, default="auto", show_default=True,
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed, preview,
-            device, quiet):
+            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed, emotion,
+            preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
@@ -75,15 +78,18 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     with output_folders(output, preview):  # made as needed, removed again when nothing is written
         _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
                  usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet,
-                 blink_rate=blink_rate, seed=seed)
+                 blink_rate=blink_rate, seed=seed, emotion=emotion)
 
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
              usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
-             blink_rate, seed):
+             blink_rate, seed, emotion):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
+    from facegen.expression import parse_emotion
+
+    emotion = parse_emotion(emotion)  # a bad label or intensity: before any work
 
     options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig),
                                  ("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None}
@@ -110,7 +116,7 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
                             template=template, fps=fps, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer, on_mismatch=on_mismatch, blink_rate=blink_rate,
-                            seed=seed)
+                            seed=seed, emotion=emotion)
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it
