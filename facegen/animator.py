@@ -71,6 +71,7 @@ class Clip(NetworkInput):
     blink_rate: float = DEFAULT_RATE  # blinks per minute (0: none; facegen.blinks)
     seed: int = 0  # of the random layers (blinks)
     blinks: list | None = None  # the blinks made for it (facegen.blinks.Blink), once run
+    saccades: list | None = None  # its gaze (facegen.gaze.Saccade), once run
     emotion: Emotion | None = None  # over the whole clip (facegen.expression)
 
 
@@ -331,26 +332,45 @@ class Animator:
 
     def layered(self, clip: Clip, stream):
         """The network's frames of `clip` with the layers it cannot predict: blinks timed by the speech
-        (facegen.blinks), whose times go in the metadata (`animation`), and the clip's emotion
-        (facegen.expression)."""
-        from facegen.blinks import blink_curve, blink_offsets, blink_times, quiet_spans
+        (facegen.blinks) and gaze (facegen.gaze: saccades, aversion; the eyeballs turned, the upper lids
+        following), whose times go in the metadata (`animation`), and the clip's emotion
+        (facegen.expression). A face without facegen's rig regions gets none of them."""
+        from facegen.arkit.shapes import arkit_shapes
+        from facegen.blinks import blink_curve, blink_times, quiet_spans
         from facegen.expression import emotion_offsets
+        from facegen.gaze import EyeTurns, gaze_curve, lid_curves, saccades
 
+        clip.blinks, clip.saccades = [], []
+        try:
+            shapes = arkit_shapes(clip.mesh)
+        except FacegenError:
+            return stream
+        fps, frames = clip.fps or self.bundle.features.fps, len(stream)
+        duration = len(clip.samples) / clip.sample_rate
+        pauses = quiet_spans(clip.samples, clip.sample_rate)
         curves, offsets = [], []
-        clip.blinks = []
-        shut = blink_offsets(clip.mesh) if clip.blink_rate else None
-        if shut is not None:
-            duration = len(clip.samples) / clip.sample_rate
-            clip.blinks = blink_times(duration, quiet_spans(clip.samples, clip.sample_rate), clip.blink_rate,
-                                      clip.seed)
-            if clip.blinks:
-                curves.append(blink_curve(clip.blinks, len(stream), clip.fps or self.bundle.features.fps))
-                offsets.append(shut)
+        clip.blinks = blink_times(duration, pauses, clip.blink_rate, clip.seed)
+        if clip.blinks:
+            curves.append(blink_curve(clip.blinks, frames, fps))
+            offsets.append(shapes.offset("eyeBlinkLeft") + shapes.offset("eyeBlinkRight"))
+        clip.saccades = saccades(duration, pauses, clip.seed)
+        gaze = gaze_curve(clip.saccades, frames, fps)
+        if clip.saccades:
+            eyes = np.concatenate([clip.mesh.regions["left_eyeball"], clip.mesh.regions["right_eyeball"]])
+            for k, name in enumerate(("eyeLookUp", "eyeLookDown")):  # their lids only: the eyes turn below
+                lids = shapes.offset(name + "Left") + shapes.offset(name + "Right")
+                lids[eyes] = 0.0
+                curves.append(lid_curves(gaze)[:, k])
+                offsets.append(lids)
         mood = emotion_offsets(clip.emotion, clip.mesh)
         if mood is not None:
-            curves.append(np.ones(len(stream), np.float32))
+            curves.append(np.ones(frames, np.float32))
             offsets.append(mood)
-        return stream.with_layers(np.stack(curves, 1), np.stack(offsets)) if curves else stream
+        if curves:
+            stream = stream.with_layers(np.stack(curves, 1), np.stack([o.reshape(-1) for o in offsets]))
+        if clip.saccades:
+            stream = stream.with_turns(EyeTurns(clip.mesh.vertices, clip.mesh.regions, gaze))
+        return stream
 
     def animation(self, clip: Clip, vertices) -> Animation:
         """The Animation of a prepared clip with its computed frames (an array or a FrameStream)."""
@@ -376,6 +396,7 @@ class Animator:
                 **({"transcript_match": clip.match.as_dict()} if clip.match is not None else {}),
                 "blinks": {"rate_per_minute": clip.blink_rate, "seed": clip.seed,
                            "times": [[b.start, b.duration] for b in clip.blinks or []]},
+                "saccades": [[s.start, s.duration, s.yaw, s.pitch] for s in clip.saccades or []],
                 **({"emotion": clip.emotion.as_dict()} if clip.emotion is not None else {}),
             },
         )

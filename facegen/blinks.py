@@ -143,18 +143,6 @@ def blink_curve(blinks: list[Blink], num_frames: int, fps: float) -> np.ndarray:
     return out.astype(np.float32)
 
 
-def blink_offsets(mesh) -> np.ndarray | None:
-    """The offsets [3V] float32 that close both eyes of `mesh` (ARKit's eyeBlinkLeft + eyeBlinkRight, the
-    rig's blink), or None for a mesh without facegen's rig regions (it does not blink)."""
-    from facegen.arkit.shapes import arkit_shapes
-
-    try:
-        shapes = arkit_shapes(mesh)
-    except FacegenError:
-        return None
-    return (shapes.offset("eyeBlinkLeft") + shapes.offset("eyeBlinkRight")).reshape(-1).astype(np.float32)
-
-
 @dataclass(frozen=True)
 class BlinkStats:
     """Measures of the blinks of an animation (docs/results.md): `per_minute`, the durations (s), the share

@@ -181,9 +181,11 @@ class FrameStream:
     dtype = np.dtype(np.float32)
     ndim = 3
 
-    def __init__(self, states, weight, base: np.ndarray, block_frames: int = BLOCK_FRAMES) -> None:
+    def __init__(self, states, weight, base: np.ndarray, block_frames: int = BLOCK_FRAMES,
+                 turns=None) -> None:
         import torch
 
+        self.turns = turns  # facegen.gaze.EyeTurns: the eyeballs turned after the affine output, or None
         self._torch = isinstance(states, torch.Tensor) and states.device.type != "cpu"
         if self._torch:
             self._states = states.float()
@@ -226,6 +228,8 @@ class FrameStream:
         else:
             np.matmul(self._states[start:stop], self._weight.T, out=flat)
             flat += self._base
+        if self.turns is not None:
+            self.turns.apply(start, out)
         self.blocks_computed += 1
         return out
 
@@ -253,11 +257,16 @@ class FrameStream:
         else:
             states = np.concatenate([self._states, curves], 1)
             weight, base = np.concatenate([self._weight, offsets.T], 1), self._base
-        return FrameStream(states, weight, base, self.block_frames)
+        return FrameStream(states, weight, base, self.block_frames, self.turns)
+
+    def with_turns(self, turns) -> FrameStream:
+        """This stream with its eyeballs turned by `turns` (facegen.gaze.EyeTurns)."""
+        return FrameStream(self._states, self._weight, self._base, self.block_frames, turns)
 
     def every(self, step: int) -> FrameStream:
         """The stream of every `step`-th frame (the same weights; its states a copy of theirs)."""
-        return FrameStream(self._states[::step], self._weight, self._base, self.block_frames)
+        return FrameStream(self._states[::step], self._weight, self._base, self.block_frames,
+                           None if self.turns is None else self.turns.every(step))
 
     def project(self, basis: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """(frames - origin) @ basis.T for every frame, [T, K] float64, for `basis` [K, 3V] and `origin` [3V],
@@ -276,6 +285,14 @@ class FrameStream:
         out = np.empty((len(states), len(basis)))
         for s in range(0, len(states), 8192):
             out[s:s + 8192] = states[s:s + 8192].astype(np.float64) @ through + offset
+        if self.turns is not None:  # the eyeballs' turn, computed on their points only
+            rows = (self.turns.indices[:, None] * 3 + np.arange(3)).reshape(-1)
+            w, b, sub = weight[rows].astype(np.float64), base[rows].astype(np.float64), basis[:, rows]
+            for s in range(0, len(states), 4096):
+                points = (states[s:s + 4096].astype(np.float64) @ w.T + b).reshape(
+                    -1, len(self.turns.indices), 3)
+                moved = self.turns.turn(s, points) - points
+                out[s:s + 4096] += moved.reshape(len(points), -1) @ sub.T.astype(np.float64)
         return out
 
     def _block_of(self, i: int) -> tuple[int, np.ndarray]:

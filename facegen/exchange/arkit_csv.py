@@ -7,8 +7,8 @@ layout Epic's Live Link Face app records and Unreal's LiveLinkFaceImporter, Maya
 The columns are `facegen.arkit.names.LIVE_LINK_COLUMNS` (the weights are placed by name); one row per frame:
 the timecode `HH:MM:SS:FF.mmm` (FF: the frame within its second at the clip's fps, the sub-frame part .000),
 BlendShapeCount 61 (the 52 shapes and 9 rotations, as the app writes), the weights in [0, 1] and the head
-and eye rotations, 0 (facegen moves no head or eyeballs by rotation). The file holds no fps: readers take it
-from the timecodes or ask. The audio goes beside the file as a WAV sidecar.
+and eye rotations in radians (the eyes' gaze, facegen.gaze; the head 0: facegen does not move it yet). The
+file holds no fps: readers take it from the timecodes or ask. The audio goes beside the file as a WAV sidecar.
 """
 
 from __future__ import annotations
@@ -55,8 +55,24 @@ def _table(anim: Animation, fit: Fit, track: str) -> str:
     shapes = LIVE_LINK_COLUMNS[2 : len(LIVE_LINK_COLUMNS) - len(LIVE_LINK_ROTATIONS)]
     order = [fit.names.index(arkit_name(column)) for column in shapes]
     count = len(shapes) + len(LIVE_LINK_ROTATIONS)
-    rotations = ",0" * len(LIVE_LINK_ROTATIONS)
     weights = np.char.mod("%.5f", fit.weights[:, order].astype(np.float64))
+    rotations = np.char.mod("%.5f", _rotations(anim, len(weights)))
     lines = [",".join(LIVE_LINK_COLUMNS)]
-    lines += [f"{timecode(t, anim.fps)},{count},{','.join(row)}{rotations}" for t, row in enumerate(weights)]
+    lines += [f"{timecode(t, anim.fps)},{count},{','.join(row)},{','.join(turn)}"
+              for t, (row, turn) in enumerate(zip(weights, rotations, strict=True))]
     return "\n".join(lines) + "\n"
+
+
+def _rotations(anim: Animation, frames: int) -> np.ndarray:
+    """The LIVE_LINK_ROTATIONS columns [frames, 9] in radians: the eyes' yaw (+ toward the character's
+    left) and pitch (+ up) from the animation's saccades (facegen.gaze), both eyes alike; no head, no roll."""
+    from facegen.gaze import Saccade, gaze_curve
+
+    out = np.zeros((frames, len(LIVE_LINK_ROTATIONS)))
+    found = [Saccade(*s) for s in anim.metadata.get("saccades") or []]
+    if found:
+        gaze = np.radians(gaze_curve(found, frames, anim.fps).astype(np.float64))
+        for side in ("Left", "Right"):
+            out[:, LIVE_LINK_ROTATIONS.index(f"{side}EyeYaw")] = gaze[:, 0]
+            out[:, LIVE_LINK_ROTATIONS.index(f"{side}EyePitch")] = gaze[:, 1]
+    return out

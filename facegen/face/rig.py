@@ -84,6 +84,16 @@ def _fit_axes(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return 1 / np.sqrt(inv_sq)
 
 
+def eyeballs(vertices: np.ndarray, regions: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The eyeballs' fitted centres and semi-axes, [2, 3] each (left, right), of a face with the regions
+    `left_eyeball` and `right_eyeball` (what the Rig and facegen.gaze turn them about)."""
+    t = np.asarray(vertices, np.float64)
+    centres, _ = face_scale(t, regions)
+    axes = np.stack([_fit_axes(t[np.asarray(regions[f"{s}_eyeball"], np.int64)], c)
+                     for s, c in zip(("left", "right"), centres, strict=True)])
+    return centres, axes
+
+
 class Rig:
     """Deformers on a face made by facegen.face.procedural (any speaker: the regions carry the layout).
 
@@ -110,9 +120,8 @@ class Rig:
         V = len(self.template)
         t = self.template
         # scale: mesh units per cm, from the distance between the eyeball centres
-        self.eye_centres, cm = face_scale(t, reg)
-        self.eye_axes = np.stack([_fit_axes(t[reg[f"{s}_eyeball"]], c)
-                                  for s, c in zip(("left", "right"), self.eye_centres, strict=True)])
+        _, cm = face_scale(t, reg)
+        self.eye_centres, self.eye_axes = eyeballs(t, reg)
         self.cm = cm
         self._graph = self._build_graph()
         dist = self.distance
