@@ -1,5 +1,6 @@
-"""Benchmark: blinks on recorded speech (issue 24) — rate, durations, share at pauses, irregularity and how
-far the ARKit fit's eyeBlink closes, measured on what `facegen animate` writes.
+"""Benchmark: blinks and gaze on recorded speech (issue 24) — blink rate, durations, share at pauses,
+irregularity and how far the ARKit fit's eyeBlink closes; saccades per 4 s, their amplitudes and the share of
+planning pauses (>= 0.5 s before speech) that end in a look away — measured on what `facegen animate` writes.
 
 The recordings are about a minute each of Asterisk's recorded prompts with their script, in a shuffled loop
 with pauses (bench_long.make_long; Debian: asterisk-core-sounds-en-wav), else espeak sentences. Blinks are
@@ -7,7 +8,8 @@ found in the fitted eyeBlinkLeft (frames above 0.1); pauses are the quiet audio 
 (facegen.blinks.quiet_spans).
 
 Targets: 10-30 blinks a minute during speech, each 100-400 ms, >= 60 % within 0.4 s of a pause, eyeBlink
->= 0.8 at the shut frame, intervals' coefficient of variation >= 0.3.
+>= 0.8 at the shut frame, intervals' coefficient of variation >= 0.3; >= 1 saccade per 4 s of speech,
+amplitudes 1-15 degrees.
 
     python benchmarks/bench_blinks.py [--clips 3] [--seconds 60]
 """
@@ -38,7 +40,17 @@ def measure(wav: Path, text: str) -> dict:
     stats = blink_stats(lid, anim.fps, quiet_spans(samples, rate))
     times = anim.metadata["blinks"]["times"]
     shut = [lid[int(a * anim.fps):int((a + d) * anim.fps) + 2].max() for a, d in times]
-    return {"seconds": len(samples) / rate, "blinks": stats.count, "per_minute": stats.per_minute,
+    pauses = quiet_spans(samples, rate)
+    moves, here = anim.metadata["saccades"], (0.0, 0.0)
+    amplitudes = []
+    for _, _, yaw, pitch in moves:
+        amplitudes.append(float(np.hypot(yaw - here[0], pitch - here[1])))
+        here = (yaw, pitch)
+    planning = [b for a, b in pauses if b - a >= 0.5 and 0 < b < len(samples) / rate - 0.3]
+    averted = [b for b in planning if any(b - 0.3 <= s <= b and abs(y) >= 5.9 for s, _, y, _ in moves)]
+    return {"seconds": len(samples) / rate, "saccades_per_4s": 4 * len(moves) / (len(samples) / rate),
+            "amplitudes": amplitudes, "averted": len(averted) / max(len(planning), 1),
+            "blinks": stats.count, "per_minute": stats.per_minute,
             "durations_ms": [1000 * d for d in stats.durations], "near_pause": stats.near_pause,
             "interval_cv": stats.interval_cv, "least_shut": float(min(shut)) if shut else None}
 
@@ -52,8 +64,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     args = parser.parse_args()
     print("| clip | s | blinks | per minute | duration ms min / median / max | within 0.4 s of a pause | "
-          "interval CV | eyeBlink at the shut frame (least) |")
-    print("|---|---|---|---|---|---|---|---|")
+          "interval CV | eyeBlink at the shut frame (least) | saccades per 4 s | amplitude deg min / "
+          "median / max | planning pauses with a look away |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as folder:
         for seed in range(args.clips):
             wav = Path(folder) / f"speech{seed}.wav"
@@ -62,7 +75,9 @@ def main() -> None:
             d = m["durations_ms"]
             print(f"| {seed} | {m['seconds']:.1f} | {m['blinks']} | {m['per_minute']:.1f} | {min(d):.0f} / "
                   f"{np.median(d):.0f} / {max(d):.0f} | {m['near_pause']:.0%} | {m['interval_cv']:.2f} | "
-                  f"{m['least_shut']:.2f} |", flush=True)
+                  f"{m['least_shut']:.2f} | {m['saccades_per_4s']:.1f} | {min(m['amplitudes']):.1f} / "
+                  f"{np.median(m['amplitudes']):.1f} / {max(m['amplitudes']):.1f} | {m['averted']:.0%} |",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -64,6 +64,10 @@ def saccades(duration: float, pauses: list[tuple[float, float]], seed: int = 0) 
         if out:
             start = max(start, out[-1].start + out[-1].duration + MIN_FIXATION_S)
         amplitude = math.hypot(to_yaw - yaw, to_pitch - pitch)
+        if amplitude > LIMIT_DEG:  # a longer way in one saccade is not made: shortened
+            to_yaw, to_pitch = (yaw + (to_yaw - yaw) * LIMIT_DEG / amplitude,
+                                pitch + (to_pitch - pitch) * LIMIT_DEG / amplitude)
+            amplitude = LIMIT_DEG
         out.append(Saccade(round(start, 4), round(saccade_duration(amplitude), 4), round(to_yaw, 3),
                            round(to_pitch, 3)))
         yaw, pitch = to_yaw, to_pitch
