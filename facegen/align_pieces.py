@@ -41,6 +41,13 @@ MAX_SEARCH = 6000  # frames of the longest search: a piece that fails is joined 
 def loud_frames(audio: np.ndarray, n_frames: int, rate: int = RATE) -> np.ndarray:
     """Frames (10 ms step, 25 ms window) clearly louder than the recording's noise floor (`audio` at
     `rate` Hz)."""
+    energy = frame_energy_db(audio, n_frames, rate)
+    low, high = np.percentile(energy, 10), np.percentile(energy, 95)
+    return energy > low + 0.5 * (high - low)
+
+
+def frame_energy_db(audio: np.ndarray, n_frames: int, rate: int = RATE) -> np.ndarray:
+    """The level (dB) of `n_frames` frames of `audio` at `rate` Hz: 10 ms step, 25 ms window."""
     win, hop = int(0.025 * rate), rate // 100
     energy = np.empty(n_frames)
     for s in range(0, n_frames, 1 << 14):  # a block of frames at a time: 2 h of them are 2.3 GB as float64
@@ -49,8 +56,7 @@ def loud_frames(audio: np.ndarray, n_frames: int, rate: int = RATE) -> np.ndarra
         under = np.pad(under, (0, (e - 1 - s) * hop + win - len(under)))
         block = np.lib.stride_tricks.sliding_window_view(under, win)[::hop].astype(np.float64)
         energy[s:e] = 10 * np.log10(np.mean(block ** 2, axis=1) + 1e-12)
-    low, high = np.percentile(energy, 10), np.percentile(energy, 95)
-    return energy > low + 0.5 * (high - low)
+    return energy
 
 
 def pieces(loud: np.ndarray) -> list[tuple[int, int]]:

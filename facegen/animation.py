@@ -22,6 +22,9 @@ class Animation:
     faces:    [F, 3] int32 triangle list of the template.
     template: [V, 3] rest pose; with `faces` and `regions` it is the template Mesh (`mesh`, `from_mesh`).
     audio:    mono float32 samples at `sample_rate` (None when there is none), the clip's sound.
+    head:     [T, 3] float32 rotation of the whole head per frame, (yaw, pitch, roll) degrees about
+              `head_pivot` (facegen.head), or None: a still head. The vertices stay face-local; writers put
+              it on a transform where the format has one.
 
     The template's fields stay flat (rather than one `mesh: Mesh` field) because they are what users,
     writers and readers of Animation read: `anim.faces`, `anim.template`, `anim.regions`.
@@ -35,6 +38,8 @@ class Animation:
     sample_rate: int = 16000
     regions: dict[str, np.ndarray] = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+    head: np.ndarray | None = None  # [T, 3] (yaw, pitch, roll) degrees about head_pivot (facegen.head)
+    head_pivot: np.ndarray | None = None  # [3] mesh units
 
     @classmethod
     def from_mesh(cls, mesh: Mesh, vertices: np.ndarray, fps: float, **fields) -> Animation:

@@ -72,6 +72,9 @@ class Clip(NetworkInput):
     seed: int = 0  # of the random layers (blinks)
     blinks: list | None = None  # the blinks made for it (facegen.blinks.Blink), once run
     saccades: list | None = None  # its gaze (facegen.gaze.Saccade), once run
+    head_motion: float = 1.0  # how much the head moves (facegen.head; 0: still)
+    head: np.ndarray | None = None  # [T, 3] degrees, once run
+    head_pivot: np.ndarray | None = None
     emotion: Emotion | None = None  # over the whole clip (facegen.expression)
 
 
@@ -178,12 +181,15 @@ class Animator:
                 fps: float | None = None, reporter: Reporter = SILENT, aligned: Aligned | None = None,
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                emotion: str | Emotion | None = None) -> Clip:
+                emotion: str | Emotion | None = None, head_motion: float = 1.0) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
         words, not their times) and `meanwhile` is called (e.g. to import the writer's libraries)."""
+        from facegen.head import check_amount
+
         blink_rate, seed, emotion = check_blink_rate(blink_rate), check_seed(seed), parse_emotion(emotion)
+        head_motion = check_amount(head_motion)
         ahead = self._take_ahead(audio, text) or aligned
         try:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
@@ -191,6 +197,7 @@ class Animator:
                                  on_mismatch=on_mismatch)
             clip.fps = check_fps(fps)
             clip.blink_rate, clip.seed, clip.emotion = blink_rate, seed, emotion
+            clip.head_motion = head_motion
             if text:
                 from facegen.words import split_directions
 
@@ -331,46 +338,10 @@ class Animator:
         return out
 
     def layered(self, clip: Clip, stream):
-        """The network's frames of `clip` with the layers it cannot predict: blinks timed by the speech
-        (facegen.blinks) and gaze (facegen.gaze: saccades, aversion; the eyeballs turned, the upper lids
-        following), whose times go in the metadata (`animation`), and the clip's emotion
-        (facegen.expression). A face without facegen's rig regions gets none of them."""
-        from facegen.arkit.shapes import arkit_shapes
-        from facegen.blinks import blink_curve, blink_times, quiet_spans
-        from facegen.expression import emotion_offsets
-        from facegen.gaze import EyeTurns, gaze_curve, lid_curves, saccades
+        """The network's frames of `clip` with what it cannot predict (facegen.layers)."""
+        from facegen.layers import add_layers
 
-        clip.blinks, clip.saccades = [], []
-        try:
-            shapes = arkit_shapes(clip.mesh)
-        except FacegenError:
-            return stream
-        fps, frames = clip.fps or self.bundle.features.fps, len(stream)
-        duration = len(clip.samples) / clip.sample_rate
-        pauses = quiet_spans(clip.samples, clip.sample_rate)
-        curves, offsets = [], []
-        clip.blinks = blink_times(duration, pauses, clip.blink_rate, clip.seed)
-        if clip.blinks:
-            curves.append(blink_curve(clip.blinks, frames, fps))
-            offsets.append(shapes.offset("eyeBlinkLeft") + shapes.offset("eyeBlinkRight"))
-        clip.saccades = saccades(duration, pauses, clip.seed)
-        gaze = gaze_curve(clip.saccades, frames, fps)
-        if clip.saccades:
-            eyes = np.concatenate([clip.mesh.regions["left_eyeball"], clip.mesh.regions["right_eyeball"]])
-            for k, name in enumerate(("eyeLookUp", "eyeLookDown")):  # their lids only: the eyes turn below
-                lids = shapes.offset(name + "Left") + shapes.offset(name + "Right")
-                lids[eyes] = 0.0
-                curves.append(lid_curves(gaze)[:, k])
-                offsets.append(lids)
-        mood = emotion_offsets(clip.emotion, clip.mesh)
-        if mood is not None:
-            curves.append(np.ones(frames, np.float32))
-            offsets.append(mood)
-        if curves:
-            stream = stream.with_layers(np.stack(curves, 1), np.stack([o.reshape(-1) for o in offsets]))
-        if clip.saccades:
-            stream = stream.with_turns(EyeTurns(clip.mesh.vertices, clip.mesh.regions, gaze))
-        return stream
+        return add_layers(clip, stream, clip.fps or self.bundle.features.fps)
 
     def animation(self, clip: Clip, vertices) -> Animation:
         """The Animation of a prepared clip with its computed frames (an array or a FrameStream)."""
@@ -383,6 +354,8 @@ class Animator:
             audio=clip.samples,
             sample_rate=clip.sample_rate,
             regions=dict(clip.mesh.regions),
+            head=clip.head,
+            head_pivot=clip.head_pivot,
             metadata={
                 "source_audio": clip.audio_name,
                 "model": bundle.path.name if bundle.path else "in-memory",
@@ -398,6 +371,8 @@ class Animator:
                            "times": [[b.start, b.duration] for b in clip.blinks or []]},
                 "saccades": [[s.start, s.duration, s.yaw, s.pitch] for s in clip.saccades or []],
                 **({"emotion": clip.emotion.as_dict()} if clip.emotion is not None else {}),
+                "head_motion": {"amount": clip.head_motion, **({} if clip.head is None else {
+                    "rms_deg": [round(float(x), 3) for x in np.sqrt(np.mean(clip.head ** 2, 0))]})},
             },
         )
 
@@ -409,7 +384,7 @@ class Animator:
                 fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                emotion: str | Emotion | None = None) -> Animation:
+                emotion: str | Emotion | None = None, head_motion: float = 1.0) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
@@ -418,7 +393,8 @@ class Animator:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                 template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
-                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed, emotion=emotion)
+                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed, emotion=emotion,
+                                head_motion=head_motion)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -435,7 +411,7 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             device: str = "auto", fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
             meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
             blink_rate: float = DEFAULT_RATE, seed: int = 0,
-            emotion: str | Emotion | None = None) -> Animation:
+            emotion: str | Emotion | None = None, head_motion: float = 1.0) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -457,11 +433,13 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     phrase ends, never periodic); `seed`: their random draws (the same inputs and seed: the same frames).
     `emotion`: "LABEL[:INTENSITY]" (facegen.expression.EMOTIONS: happy, sad, angry, surprised, afraid,
     disgusted, neutral; intensity 0-1, default 1) over the whole clip, on top of what the words do.
+    `head_motion`: how much the head moves with the prosody (facegen.head: nods, tilts, drift; 0: still,
+    1: as people move theirs, up to 3), as `Animation.head` (the vertices stay face-local).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
         stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch, blink_rate=blink_rate,
-        seed=seed, emotion=emotion)
+        seed=seed, emotion=emotion, head_motion=head_motion)
 
 
 MAX_FPS = 240.0  # output frames per second at most

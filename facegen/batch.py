@@ -59,6 +59,7 @@ class Job:
     blink_rate: float = DEFAULT_RATE  # blinks per minute (facegen.blinks)
     seed: int = 0  # of the random layers
     emotion: Emotion | None = None  # the row's 'emotion', else the run's (facegen.expression)
+    head_motion: float = 1.0  # facegen.head
     options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
 
     @property
@@ -367,7 +368,8 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                                                no_text=job.no_text, speaker=job.speaker, fps=job.fps,
                                                reporter=SILENT.noting(note), aligned=job.aligned,
                                                on_mismatch=job.on_mismatch, blink_rate=job.blink_rate,
-                                               seed=job.seed, emotion=job.emotion)
+                                               seed=job.seed, emotion=job.emotion,
+                                               head_motion=job.head_motion)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error

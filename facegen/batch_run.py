@@ -62,7 +62,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  text_model: str | None = None, device: str = "auto", batch_size: int = 16,
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
                  on_mismatch: str = "error", blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                 emotion: str | None = None,
+                 emotion: str | None = None, head_motion: float = 1.0,
                  on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
@@ -74,7 +74,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     "error" refuses a line whose transcript does not match its speech, "warn" writes it and flags it in
     the reports (each item's "match" holds its score either way: facegen.transcript_match); `blink_rate`
     and `seed`: every item's blinks (facegen.blinks); `emotion`: every item's (facegen.expression), where
-    its row has no 'emotion' of its own.
+    its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head).
     `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
     ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
@@ -94,6 +94,9 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     from facegen.expression import parse_emotion
 
     emotion = parse_emotion(emotion)
+    from facegen.head import check_amount
+
+    head_motion = check_amount(head_motion)
     if on_mismatch not in ON_MISMATCH:
         raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
                            param="on_mismatch")
@@ -108,6 +111,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         job.on_mismatch = on_mismatch
         job.blink_rate, job.seed = blink_rate, seed
         job.emotion = job.emotion if job.emotion is not None else emotion
+        job.head_motion = head_motion
         job.options = {"mode": usd_mode} if usd_mode else {}
         job.audio = Path(os.path.abspath(job.audio))
         job.alignment = Path(os.path.abspath(job.alignment)) if job.alignment is not None else None
@@ -123,6 +127,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         options |= {"fps": fps, "usd_mode": usd_mode}
     if (blink_rate, seed) != (DEFAULT_RATE, 0):
         options |= {"blinks": [blink_rate, seed]}
+    if head_motion != 1.0:
+        options |= {"head_motion": head_motion}
     state = RunState.load(out)
     results: dict[int, JobResult] = {}
     keys: dict[int, str] = {}

@@ -60,6 +60,9 @@ from facegen.runtime import Reporter, say_stderr
               help="Blinks per minute, timed by the speech (more at pauses and phrase ends); 0 = none.")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="Seed of the random layers (blinks): the same inputs and seed give the same files.")
+@click.option("--head-motion", type=FiniteRange(0, 3), default=1.0, show_default=True, metavar="AMOUNT",
+              help="How much the head moves with the voice (nods, tilts, drift; written as a transform where the "
+                   "format has one): 0 = still, 1 = as people do.")
 @click.option("--emotion", metavar="LABEL[:INTENSITY]",
               help="An emotion over the whole clip, on top of what the words do: neutral, happy, sad, angry, "
                    "surprised, afraid or disgusted, intensity 0-1 (default 1), e.g. happy:0.6.")
@@ -69,8 +72,8 @@ from facegen.runtime import Reporter, say_stderr
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed, emotion,
-            preview, device, quiet):
+            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed, head_motion,
+            emotion, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
@@ -78,12 +81,12 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     with output_folders(output, preview):  # made as needed, removed again when nothing is written
         _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
                  usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet,
-                 blink_rate=blink_rate, seed=seed, emotion=emotion)
+                 blink_rate=blink_rate, seed=seed, emotion=emotion, head_motion=head_motion)
 
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
              usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
-             blink_rate, seed, emotion):
+             blink_rate, seed, emotion, head_motion):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
@@ -116,7 +119,7 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
                             template=template, fps=fps, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer, on_mismatch=on_mismatch, blink_rate=blink_rate,
-                            seed=seed, emotion=emotion)
+                            seed=seed, emotion=emotion, head_motion=head_motion)
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it

@@ -7,8 +7,8 @@ layout Epic's Live Link Face app records and Unreal's LiveLinkFaceImporter, Maya
 The columns are `facegen.arkit.names.LIVE_LINK_COLUMNS` (the weights are placed by name); one row per frame:
 the timecode `HH:MM:SS:FF.mmm` (FF: the frame within its second at the clip's fps, the sub-frame part .000),
 BlendShapeCount 61 (the 52 shapes and 9 rotations, as the app writes), the weights in [0, 1] and the head
-and eye rotations in radians (the eyes' gaze, facegen.gaze; the head 0: facegen does not move it yet). The
-file holds no fps: readers take it from the timecodes or ask. The audio goes beside the file as a WAV sidecar.
+and eye rotations in radians (facegen.head's head motion, facegen.gaze's gaze). The file holds no fps: readers
+take it from the timecodes or ask. The audio goes beside the file as a WAV sidecar.
 """
 
 from __future__ import annotations
@@ -64,11 +64,16 @@ def _table(anim: Animation, fit: Fit, track: str) -> str:
 
 
 def _rotations(anim: Animation, frames: int) -> np.ndarray:
-    """The LIVE_LINK_ROTATIONS columns [frames, 9] in radians: the eyes' yaw (+ toward the character's
-    left) and pitch (+ up) from the animation's saccades (facegen.gaze), both eyes alike; no head, no roll."""
+    """The LIVE_LINK_ROTATIONS columns [frames, 9] in radians: the head's yaw, pitch, roll (facegen.head's
+    angles) and the eyes' yaw (+ toward the character's left) and pitch (+ up) from the animation's saccades
+    (facegen.gaze), both eyes alike, no eye roll."""
     from facegen.gaze import Saccade, gaze_curve
 
     out = np.zeros((frames, len(LIVE_LINK_ROTATIONS)))
+    if anim.head is not None:
+        head = np.radians(np.asarray(anim.head, np.float64)[:frames])
+        for k, name in enumerate(("HeadYaw", "HeadPitch", "HeadRoll")):
+            out[:len(head), LIVE_LINK_ROTATIONS.index(name)] = head[:, k]
     found = [Saccade(*s) for s in anim.metadata.get("saccades") or []]
     if found:
         gaze = np.radians(gaze_curve(found, frames, anim.fps).astype(np.float64))

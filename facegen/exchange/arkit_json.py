@@ -75,6 +75,10 @@ def _document(anim: Animation, fit: Fit, track: str) -> Iterator[str]:
             "audio": track or None,
             **({"blinks": anim.metadata["blinks"]} if "blinks" in anim.metadata else {}),
         },
+        **({} if anim.head is None else {"facegenHead": {
+            "angles": ["yaw", "pitch", "roll"], "units": "degrees", "order": "Ry(yaw) Rx(pitch) Rz(roll)",
+            "pivot": [round(float(x), 6) for x in anim.head_pivot],
+            "values": np.asarray(anim.head, np.float64).round(3).tolist()}}),
     }
     head, tail = json.dumps(doc, separators=(",", ":")).split('"weightMat":[]')
     yield head + '"weightMat":['

@@ -3,8 +3,10 @@
 Layout of a written file:
 
     scene 0        node "Face" (scale = meters_per_unit, default 0.2 like the USD writer: glTF is in
-                   meters, the vertex data stays in the animation's units); a global KHR_audio_emitter
-                   emitter playing the clip's sound when there is audio
+                   meters, the vertex data stays in the animation's units); with head motion (facegen.head)
+                   node 1 "Head", its parent, at the head's pivot (Face translated back by it), whose
+                   rotation is animated; a global KHR_audio_emitter emitter playing the clip's sound when
+                   there is audio
     mesh "Face"    one triangle primitive: POSITION (the template: the neutral face, a real pose, which
                    static readers show), NORMAL, TEXCOORD_0 (exchange/surface.py's UVs, v down), indices
                    (uint16 when V < 65536), material 0; morph `targets` of POSITION and NORMAL offsets
@@ -17,8 +19,9 @@ Layout of a written file:
                    moving surface (least squares over the frames). mesh.weights = frame 0's weights;
                    mesh.extras.targetNames names the targets (three.js and Blender read it).
     material 0     "Skin": pbrMetallicRoughness, base colour surface.SKIN_COLOR, metallic 0, roughness 0.6
-    animation      "speech": one channel, the node's `weights`, LINEAR sampler, input times frame / fps
-                   (0 .. (T-1)/fps), output T x K weights
+    animation      "speech": a channel of the Face node's `weights`, LINEAR sampler, input times frame /
+                   fps (0 .. (T-1)/fps), output T x K weights; with head motion a second, the Head node's
+                   `rotation` (T unit quaternions) on the same times
     audio          KHR_audio_emitter (draft; in extensionsUsed only, so readers without it still load the
                    file): the clip as audio/mpeg in a bufferView, one source (autoPlay, no loop), one global
                    emitter on the scene. The MP3 is delay-compensated (exchange/mp3.py). The exact clip is
@@ -173,12 +176,23 @@ def build(
     skin = g.Material(name=MATERIAL_NAME, pbrMetallicRoughness=g.PbrMetallicRoughness(
         baseColorFactor=[*SKIN_COLOR, 1.0], metallicFactor=SKIN_METALLIC, roughnessFactor=SKIN_ROUGHNESS))
     node = g.Node(name="Face", mesh=0, scale=[float(meters_per_unit)] * 3)
-    animation = g.Animation(
-        name="speech",
-        samplers=[g.AnimationSampler(input=time_input, output=weight_output, interpolation="LINEAR")],
-        channels=[g.AnimationChannel(sampler=0, target=g.AnimationChannelTarget(node=0, path="weights"))],
-    )
-    scene = g.Scene(name="Scene", nodes=[0])
+    nodes = [node]
+    samplers = [g.AnimationSampler(input=time_input, output=weight_output, interpolation="LINEAR")]
+    channels = [g.AnimationChannel(sampler=0, target=g.AnimationChannelTarget(node=0, path="weights"))]
+    if anim.head is not None:  # the head turns about its pivot: a parent node's rotation channel
+        from facegen.head import quaternions
+
+        pivot = np.asarray(anim.head_pivot, np.float64) * meters_per_unit
+        turns = quaternions(anim.head)
+        node.translation = (-pivot).tolist()
+        nodes.append(g.Node(name="Head", children=[0], translation=pivot.tolist(),
+                            rotation=turns[0].astype(float).tolist()))
+        samplers.append(g.AnimationSampler(input=time_input, output=accessor(turns, "VEC4", None),
+                                           interpolation="LINEAR"))
+        channels.append(g.AnimationChannel(sampler=1,
+                                           target=g.AnimationChannelTarget(node=1, path="rotation")))
+    animation = g.Animation(name="speech", samplers=samplers, channels=channels)
+    scene = g.Scene(name="Scene", nodes=[len(nodes) - 1])
     extras = {
         "facegen": {
             "version": __version__,
@@ -199,7 +213,7 @@ def build(
     }
     gltf = g.GLTF2(
         asset=g.Asset(version="2.0", generator=f"facegen {__version__}", extras=extras),
-        scene=0, scenes=[scene], nodes=[node], meshes=[mesh], materials=[skin], animations=[animation],
+        scene=0, scenes=[scene], nodes=nodes, meshes=[mesh], materials=[skin], animations=[animation],
         accessors=accessors,
     )
     if sound is not None:

@@ -1,7 +1,8 @@
 """NumPy .npy: vertex positions as a [T, 3V] float32 array (the FaceFormer/CodeTalker layout).
 
 Row t is frame t, columns x0 y0 z0 x1 y1 z1 ...; faces and fps are not stored (the template mesh and
-`--fps`, 25 by default, supply them). The audio goes beside the file as a WAV sidecar (`out.wav`).
+`--fps`, 25 by default, supply them). The audio goes beside the file as a WAV sidecar (`out.wav`), the
+head's motion (facegen.head) as `out.head.npy`, [T, 3] float32 (yaw, pitch, roll) degrees.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from facegen.animation import DEFAULT_FPS, Animation, check_animation
+from facegen.atomic import Transaction
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
@@ -36,7 +38,17 @@ def write(
         shape = (anim.num_frames, 3 * anim.num_vertices)  # the header np.save writes, then the frames
         np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": shape})
         f.writelines(np.ascontiguousarray(block, dtype="<f4").data for _, block in anim.frame_blocks())
-    return [path] if wav is None else [path, wav]
+        if anim.head is not None:  # beside it, so the research layout stays [T, 3V]
+            with Transaction() as transaction, open(transaction.file(head_path(path)), "wb") as h:
+                np.save(h, np.asarray(anim.head, "<f4"))
+    return [path, *([] if wav is None else [wav]), *([] if anim.head is None else [head_path(path)])]
+
+
+def head_path(path: str | os.PathLike) -> Path:
+    """Where the head's motion of the .npy `path` goes: NAME.head.npy, [T, 3] float32 (yaw, pitch, roll)
+    degrees (facegen.head)."""
+    path = Path(path)
+    return path.with_name(path.stem + ".head.npy")
 
 
 def load_frames(path: str | os.PathLike) -> np.ndarray:

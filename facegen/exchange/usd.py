@@ -3,7 +3,9 @@ shapes), audio beside it.
 
 Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate):
 
-    /Face          Xform, kind=component, the stage's defaultPrim
+    /Face          Xform, kind=component, the stage's defaultPrim; with head motion (facegen.head) its
+                   xformOpOrder is translate:pivot, rotateZXY:head (pitch, yaw, roll degrees, one time sample
+                   per frame), !invert!translate:pivot: the head turns about the top of the neck
     /Face/Mesh     Mesh: faceVertexCounts (all 3), faceVertexIndices, subdivisionScheme "none",
                    orientation rightHanded (BIWI triangles wind counter-clockwise seen from the front, so
                    normals face +Z, out of the face); `points` and `extent` have one time sample per
@@ -183,6 +185,8 @@ def _author_stage(
     root = (UsdSkel.Root if mode == "blendshapes" else UsdGeom.Xform).Define(stage, ROOT_PATH)
     Usd.ModelAPI(root.GetPrim()).SetKind(Kind.Tokens.component)
     stage.SetDefaultPrim(root.GetPrim())
+    if anim.head is not None:
+        _author_head(root, anim.head, anim.head_pivot)
 
     mesh = UsdGeom.Mesh.Define(stage, MESH_PATH)
     faces = np.ascontiguousarray(anim.faces, dtype=np.int32)
@@ -218,6 +222,20 @@ def _author_stage(
             **(info or {}),
         }
     }
+
+
+def _author_head(root, angles: np.ndarray, pivot: np.ndarray) -> None:
+    """The head's motion on /Face (facegen.head): translate to the pivot, rotateZXY (pitch, yaw, roll) in
+    degrees with one time sample per frame, translate back; the points stay face-local."""
+    from pxr import Gf, UsdGeom
+
+    xform = UsdGeom.Xformable(root.GetPrim())
+    move = xform.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble, "pivot")
+    move.Set(Gf.Vec3d(*np.asarray(pivot, np.float64).tolist()))
+    turn = xform.AddRotateZXYOp(UsdGeom.XformOp.PrecisionFloat, "head")
+    for t, (yaw, pitch, roll) in enumerate(np.asarray(angles, np.float64).tolist()):
+        turn.Set(Gf.Vec3f(pitch, yaw, roll), float(t))
+    xform.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble, "pivot", isInverseOp=True)
 
 
 def _author_look(stage, mesh, template: np.ndarray) -> None:
