@@ -61,8 +61,8 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="Seed of the random layers (blinks): the same inputs and seed give the same files.")
 @click.option("--head-motion", type=FiniteRange(0, 3), default=1.0, show_default=True, metavar="AMOUNT",
-              help="How much the head moves with the voice (nods, tilts, drift; written as a transform where the "
-                   "format has one): 0 = still, 1 = as people do.")
+              help="How much the head moves with the voice (nods, tilts, drift; written as a transform where "
+                   "the format has one): 0 = still, 1 = as people do.")
 @click.option("--emotion", metavar="LABEL[:INTENSITY]",
               help="An emotion over the whole clip, on top of what the words do: neutral, happy, sad, angry, "
                    "surprised, afraid or disgusted, intensity 0-1 (default 1), e.g. happy:0.6.")
@@ -72,8 +72,8 @@ from facegen.runtime import Reporter, say_stderr
               help="Where the network runs: auto = a CUDA GPU when there is one, else the CPU.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
-            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed, head_motion,
-            emotion, preview, device, quiet):
+            usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed,
+            head_motion, emotion, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
