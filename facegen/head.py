@@ -7,9 +7,9 @@ with accented syllables, slightly ahead of them; they settle or tilt as a phrase
 rest, less and slower than during speech; the range is a few degrees.
 
 - accents: peaks of the level (dB, 10 ms frames, smoothed over 80 ms) rising ACCENT_DB over the level of
-  the second around them, at least ACCENT_GAP_S apart, inside speech; each makes a nod (pitch down and back, a
-  Gaussian bump of NOD_WIDTH_S, lowest NOD_LEAD_S before the peak), its
-  size growing with the accent's prominence;
+  the second around them, at least ACCENT_GAP_S apart, inside speech and not just before or after a pause;
+  each makes a nod (pitch down and back, a Gaussian bump of NOD_WIDTH_S, lowest NOD_LEAD_S before the
+  peak), its size growing with the accent's prominence;
 - phrase ends (a pause of PHRASE_PAUSE_S or more after speech): a roll tilt to a random side and a small
   pitch settle, moving in on the phrase's last syllable, held through the pause, released as speech resumes;
 - drift: a slow random walk on each axis (Ornstein-Uhlenbeck), DRIFT_DEG and DRIFT_TAU_S in speech, 0.4
@@ -38,6 +38,7 @@ ACCENT_GAP_S = 0.35
 NOD_DEG = (0.8, 2.5)  # a nod's size from the least to the most prominent accent (x amount)
 NOD_WIDTH_S = 0.1  # a nod: down and back in about 0.4 s, its lowest point NOD_LEAD_S before the accent
 NOD_LEAD_S = 0.08
+NOD_CLEAR_S = 0.25  # no nod on an accent this close to a pause (a phrase's end tilts, its onset is loud)
 PHRASE_PAUSE_S = 0.3
 TILT_DEG = (0.5, 1.5)
 TILT_LEAD_S = 0.3  # the tilt starts on the phrase's last syllable and peaks early in the pause
@@ -92,7 +93,7 @@ def head_motion(samples: np.ndarray, sample_rate: int, pauses: list[tuple[float,
         last = -1.0
         for k in np.flatnonzero(is_peak):
             when = k / 100
-            inside = not any(a <= when < b for a, b in pauses)
+            inside = not any(a - NOD_CLEAR_S <= when < b + NOD_CLEAR_S for a, b in pauses)  # nods in speech
             if not inside or when - last < ACCENT_GAP_S:
                 continue
             last = when
