@@ -325,3 +325,34 @@ def test_blender_addon_installs_as_facegen_blender(blender_python, arkit_files, 
     assert run["import"]["operator"] == ["FINISHED"]
     assert (run["scene"]["fps"], run["scene"]["frame_end"], len(run["scene"]["sounds"])) == (25, 49, 1)
     assert_keyed(run["values"]["Character"], expected_values(weights["json"], CHARACTER_KEYS, [0, 25, 49]))
+
+
+@pytest.mark.parametrize("suffix, options", [(".usdc", {}), (".glb", {"morph_targets": "all"})],
+                         ids=["usdc", "glb"])
+def test_blender_imports_the_head_motion(blender_python, clip, tmp_path, suffix, options):
+    """The head's transform (facegen.head) animated in Blender: its evaluated world positions are the
+    face-local frames turned about the pivot, frame by frame."""
+    from dataclasses import replace
+
+    from facegen.head import rotations
+
+    t = np.arange(FRAMES) / clip.fps
+    angles = np.stack([4 * np.sin(2 * np.pi * 0.7 * t), 3 * np.sin(2 * np.pi * 1.1 * t + 1),
+                       2 * np.sin(2 * np.pi * 0.4 * t + 2)], 1).astype(np.float32)
+    pivot = (clip.template.mean(0) - [0, 0.2 * clip.size, 0.1 * clip.size]).astype(np.float32)
+    moving = replace(clip, head=angles, head_pivot=pivot)
+    path = tmp_path / f"clip{suffix}"
+    write_animation(moving, path, **options)
+    positions = {}
+    turns = rotations(angles)
+    for frame in (0, 17, FRAMES - 1):
+        world = pivot + (clip.vertices[frame].astype(np.float64) - pivot) @ turns[frame].T
+        positions[str(frame)] = str(tmp_path / f"frame{frame}.npy")
+        np.save(positions[str(frame)], world)
+    expect = {"vertices": clip.num_vertices, "frames": FRAMES, "fps": clip.fps, "meters_per_unit": 0.2,
+              "tolerance": TOLERANCE * clip.size, "positions": positions, "sound_frames": FRAMES,
+              "packed": False}
+    (tmp_path / "expect.json").write_text(json.dumps(expect))
+    result = run_check(blender_python, [str(path), "--expect-json", str(tmp_path / "expect.json")], tmp_path)
+    failed = {name: c["detail"] for name, c in result["checks"].items() if not c["ok"]}
+    assert not failed, f"{suffix}: {failed}"
