@@ -69,8 +69,11 @@ def run_check(folder: Path, spec: dict) -> dict:
 
 def test_threejs_player_drives_arkit_named_morph_targets(node_folder):
     weights = arkit_weights(FRAMES)
+    head = np.stack([5 * np.sin(np.arange(FRAMES) / 7), 3 * np.cos(np.arange(FRAMES) / 5),
+                     2 * np.sin(np.arange(FRAMES) / 3)], 1)
     doc = {"exportFps": FPS, "trackPath": "/World/audio2face/Player", "numPoses": 52, "numFrames": FRAMES,
-           "facsNames": list(ARKIT_NAMES), "weightMat": weights.tolist(), "facegen": {"audio": "out.wav"}}
+           "facsNames": list(ARKIT_NAMES), "weightMat": weights.tolist(), "facegen": {"audio": "out.wav"},
+           "facegenHead": {"angles": ["yaw", "pitch", "roll"], "units": "degrees", "values": head.tolist()}}
     (node_folder / "out.json").write_text(json.dumps(doc))
     frames = [0, 1, 12.5, 13, FRAMES - 1]  # 12.5: halfway between two frames (linear)
     times = [f / FPS for f in frames]
@@ -87,7 +90,15 @@ def test_threejs_player_drives_arkit_named_morph_targets(node_folder):
     found = {arkit_name(t) for targets in MESHES.values() for t in targets} - {None}
     assert result["unmatched"] == result["player_unmatched"] == [n for n in ARKIT_NAMES if n not in found]
     assert sorted(result["matched"]["jawOpen"]) == ["Head/jawOpen", "Teeth/Wolf3D.jawOpen"]
-    assert result["tracks"] == 9 and result["duration"] == pytest.approx((FRAMES - 1) / FPS)
+    assert result["tracks"] == 10 and result["duration"] == pytest.approx((FRAMES - 1) / FPS)
+    from scipy.spatial.transform import Rotation
+
+    from facegen.head import rotations
+
+    for frame, quaternion in zip(frames, result["quaternions"], strict=True):
+        if frame % 1 == 0:  # the head's rotation at each frame (x, y, z, w): facegen.head's matrix
+            want = rotations(head[int(frame)][None])[0]
+            assert np.allclose(Rotation.from_quat(quaternion).as_matrix(), want, atol=1e-5), frame
 
     for samples in (result["sampled"], result["played"]):
         for i, influences in enumerate(samples):

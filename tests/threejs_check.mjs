@@ -48,7 +48,12 @@ const action = mixer.clipAction(clip);
 action.setLoop(THREE.LoopOnce, 1);
 action.clampWhenFinished = true;
 action.play();
-const sampled = spec.times.map((t) => { mixer.setTime(t); return influences(root); });
+const quaternions = [];
+const sampled = spec.times.map((t) => {
+  mixer.setTime(t);
+  quaternions.push(root.quaternion.toArray());
+  return influences(root);
+});
 
 const other = avatar();
 const player = new ArkitPlayer(other, weights);
@@ -61,5 +66,5 @@ const errors = spec.bad.map((doc) => {
 });
 console.log("threejs_check: " + JSON.stringify({
   rule: spec.names.map(arkitName), matched, unmatched, tracks: clip.tracks.length, duration: clip.duration,
-  sampled, played, player_unmatched: player.unmatched, errors,
+  sampled, played, player_unmatched: player.unmatched, errors, quaternions,
 }));

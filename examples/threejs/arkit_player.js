@@ -75,7 +75,28 @@ export function arkitClip(weights, root, name = "arkit") {
     }
   });
   const unmatched = [...column.keys()].filter((shape) => !(shape in matched));
-  return { clip: new THREE.AnimationClip(name, -1, tracks), matched, unmatched };
+  const head = headTrack(weights, root, times);
+  if (head) tracks.push(head);
+  return { clip: new THREE.AnimationClip(name, -1, tracks), matched, unmatched, head: Boolean(head) };
+}
+
+/**
+ * The head's motion of a facegen JSON (its "facegenHead": yaw, pitch, roll in degrees per frame, applied as
+ * Ry(yaw) Rx(pitch) Rz(roll): three.js's Euler order "YXZ") as a QuaternionKeyframeTrack on `head` (default
+ * the root: put the avatar's head under a group at its neck to turn it about the neck), or null.
+ */
+export function headTrack(weights, head, times) {
+  const values = weights.facegenHead && weights.facegenHead.values;
+  if (!Array.isArray(values) || values.length !== times.length) return null;
+  const out = new Float32Array(values.length * 4);
+  const euler = new THREE.Euler();
+  const q = new THREE.Quaternion();
+  const rad = Math.PI / 180;
+  values.forEach(([yaw, pitch, roll], i) => {
+    q.setFromEuler(euler.set(pitch * rad, yaw * rad, roll * rad, "YXZ"));
+    q.toArray(out, i * 4);
+  });
+  return new THREE.QuaternionKeyframeTrack(`${head.uuid}.quaternion`, times, out);
 }
 
 /** The avatar, its ARKit clip and (optionally) the clip's sound, started together and kept in sync. */
