@@ -289,7 +289,9 @@ def run(
             extract_audio(video, wav)
             audio, sr = load_audio(wav)
             words, phones = align_phones(audio, sr, text)
-            anim = animator.animate(wav, text=text, speaker=speaker)
+            # the lips alone: no blinks (MediaPipe's iris landmarks, the scale, go astray under a shut lid)
+            # and no head motion (the render does not turn the head; the tracker's scale would follow it)
+            anim = animator.animate(wav, text=text, speaker=speaker, blink_rate=0, head_motion=0)
             frames = tmp / f"{name}_facegen.npy"
             render_frames(anim, frames, preview_colors)
             geo = geometric_aperture(np.asarray(anim.vertices), face)
