@@ -76,6 +76,7 @@ class Clip(NetworkInput):
     head: np.ndarray | None = None  # [T, 3] degrees, once run
     head_pivot: np.ndarray | None = None
     emotion: Emotion | None = None  # over the whole clip (facegen.expression)
+    emotion_spans: list | None = None  # (Emotion, start s, end s) marked in the transcript
 
 
 class Animator:
@@ -190,6 +191,9 @@ class Animator:
 
         blink_rate, seed, emotion = check_blink_rate(blink_rate), check_seed(seed), parse_emotion(emotion)
         head_motion = check_amount(head_motion)
+        from facegen.expression import emotion_spans, is_markup, span_times
+
+        spans = emotion_spans(text)  # bad markup: before any work
         ahead = self._take_ahead(audio, text) or aligned
         try:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
@@ -201,7 +205,8 @@ class Animator:
             if text:
                 from facegen.words import split_directions
 
-                clip.directions = tuple(split_directions(text)[1])
+                clip.directions = tuple(d for d in split_directions(text)[1] if not is_markup(d))
+                clip.emotion_spans = span_times(text, spans, clip.words)
             return clip
         finally:
             if ahead is not None and ahead is not aligned:
@@ -371,6 +376,8 @@ class Animator:
                            "times": [[b.start, b.duration] for b in clip.blinks or []]},
                 "saccades": [[s.start, s.duration, s.yaw, s.pitch] for s in clip.saccades or []],
                 **({"emotion": clip.emotion.as_dict()} if clip.emotion is not None else {}),
+                **({"emotion_spans": [{**e.as_dict(), "start": round(a, 4), "end": round(b, 4)}
+                                      for e, a, b in clip.emotion_spans]} if clip.emotion_spans else {}),
                 "head_motion": {"amount": clip.head_motion, **({} if clip.head is None else {
                     "rms_deg": [round(float(x), 3) for x in np.sqrt(np.mean(clip.head ** 2, 0))]})},
             },

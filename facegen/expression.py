@@ -13,6 +13,7 @@ speech. The prototype times the intensity (0-1) is a layer over the network's fr
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,3 +91,94 @@ def emotion_offsets(emotion: Emotion | None, mesh) -> np.ndarray | None:
     total = sum(amount * shapes.offset(name).astype(np.float64)
                 for name, amount in EMOTIONS[emotion.label].items())
     return (emotion.intensity * total).reshape(-1).astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------------
+# spans in the transcript: "[happy:0.7] what a day [/happy]"
+
+_MARKUP = re.compile(r"\[\s*(/)?\s*([A-Za-z]+)\s*(?::\s*([^\]]*?))?\s*\]")
+RAMP_S = 0.3  # a span's emotion comes in over this much time around its first word, and goes likewise
+
+
+@dataclass(frozen=True)
+class EmotionSpan:
+    """An emotion over part of a transcript: from character `first` (after the opening tag) to `last` (the
+    closing tag's start)."""
+
+    emotion: Emotion
+    first: int
+    last: int
+
+
+def emotion_spans(text: str | None) -> list[EmotionSpan]:
+    """The emotion spans marked in `text` (`[LABEL]` or `[LABEL:INTENSITY]` ... `[/LABEL]`, labels of
+    EMOTIONS). Brackets holding anything else are stage directions (facegen.words.split_directions), as the
+    markup is too: neither reaches the aligner. Unknown or unbalanced markup is a FacegenError naming the
+    character where it is."""
+    spans: list[EmotionSpan] = []
+    open_: dict[str, tuple[Emotion, int, int]] = {}
+    for m in _MARKUP.finditer(text or ""):
+        closing, label, value = m.group(1), m.group(2).lower(), m.group(3)
+        where = f"the transcript's markup {m.group(0)!r} at character {m.start() + 1}"
+        if label not in EMOTIONS:
+            if closing or value is not None:
+                raise FacegenError(f"{where} names no emotion: use one of {', '.join(EMOTIONS)}, as "
+                                   f"[happy:0.7] ... [/happy]", param="text")
+            continue  # a stage direction such as [tone]
+        if closing:
+            if label not in open_:
+                raise FacegenError(f"{where} closes a span that was never opened: open it with [{label}] "
+                                   f"before", param="text")
+            emotion, first, _ = open_.pop(label)
+            spans.append(EmotionSpan(emotion, first, m.start()))
+            continue
+        if label in open_:
+            raise FacegenError(f"{where} opens [{label}] again inside its own span: close the first with "
+                               f"[/{label}]", param="text")
+        try:
+            emotion = parse_emotion(label if value is None else f"{label}:{value}")
+        except FacegenError as exc:
+            raise FacegenError(f"{where}: {exc}", param="text") from None
+        open_[label] = (emotion, m.end(), m.start())
+    if open_:
+        label, (_, _, start) = min(open_.items(), key=lambda item: item[1][2])
+        raise FacegenError(f"the transcript's markup [{label}] at character {start + 1} is never closed: end "
+                           f"its span with [/{label}]", param="text")
+    return sorted(spans, key=lambda s: s.first)
+
+
+def is_markup(direction: str) -> bool:
+    """Whether a stage direction (as facegen.words.split_directions gives it) is emotion markup."""
+    m = _MARKUP.fullmatch(direction.strip())
+    return m is not None and m.group(2).lower() in EMOTIONS
+
+
+def span_times(text: str, spans: list[EmotionSpan], words: list) -> list[tuple[Emotion, float, float]]:
+    """(emotion, start s, end s) of each span: from its first word's start to its last word's end, the words
+    (`words`, aligned, with .start/.end) counted as facegen.words.normalize_transcript counts them."""
+    from facegen.words import normalize_transcript
+
+    total = len(normalize_transcript(text))
+    out = []
+    for span in spans:
+        first = len(normalize_transcript(text[:span.first]))
+        last = len(normalize_transcript(text[:span.last]))
+        if not words or not total or last <= first:
+            continue
+        scale = len(words) / total  # the aligner's words, where they differ in number from the transcript's
+        a = min(int(first * scale), len(words) - 1)
+        b = min(max(round(last * scale), a + 1), len(words))
+        out.append((span.emotion, float(words[a].start), float(words[b - 1].end)))
+    return out
+
+
+def span_curve(start: float, end: float, num_frames: int, fps: float) -> np.ndarray:
+    """[num_frames] float32: 0 outside, 1 inside (`start`, `end`), smoothsteps of RAMP_S centred on them."""
+    t = np.arange(num_frames) / fps
+
+    def ramp(x: np.ndarray) -> np.ndarray:
+        x = np.clip(x, 0, 1)
+        return x * x * (3 - 2 * x)
+
+    return (ramp((t - start + RAMP_S / 2) / RAMP_S) * (1 - ramp((t - end + RAMP_S / 2) / RAMP_S))).astype(
+        np.float32)

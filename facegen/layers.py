@@ -15,7 +15,7 @@ def add_layers(clip, stream, fps: float):
     blinks, saccades, head angles and pivot set on it. A face without facegen's rig regions gets none."""
     from facegen.arkit.shapes import arkit_shapes
     from facegen.blinks import blink_curve, blink_times, quiet_spans
-    from facegen.expression import emotion_offsets
+    from facegen.expression import emotion_offsets, span_curve
     from facegen.gaze import EyeTurns, gaze_curve, lid_curves, saccades
 
     clip.blinks, clip.saccades, clip.head = [], [], None
@@ -44,6 +44,11 @@ def add_layers(clip, stream, fps: float):
     if mood is not None:
         curves.append(np.ones(frames, np.float32))
         offsets.append(mood)
+    for emotion, start, end in clip.emotion_spans or []:  # marked in the transcript
+        mood = emotion_offsets(emotion, clip.mesh)
+        if mood is not None:
+            curves.append(span_curve(start, end, frames, fps))
+            offsets.append(mood)
     if curves:
         stream = stream.with_layers(np.stack(curves, 1), np.stack([o.reshape(-1) for o in offsets]))
     if clip.saccades:

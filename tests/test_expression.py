@@ -99,3 +99,41 @@ def test_cli_and_batch(tmp_path, text):
     manifest.write_text(json.dumps([{"audio": wav, "text": "hello", "output": "a.json", "emotion": "sad:2"}]))
     bad = subprocess.run([*batch, "-o", str(tmp_path / "o2")], check=False, capture_output=True, text=True)
     assert bad.returncode == 2 and "intensity" in bad.stderr and not (tmp_path / "o2").exists(), bad.stderr
+
+
+def test_markup_spans_and_their_errors():
+    from facegen.expression import emotion_spans, is_markup
+
+    text = "Well [happy:0.7] what a lovely [tone] day [/happy] it was, [sad]truly[/sad]."
+    spans = emotion_spans(text)
+    assert [(s.emotion, text[s.first:s.last].strip()) for s in spans] == [
+        (Emotion("happy", 0.7), "what a lovely [tone] day"), (Emotion("sad", 1.0), "truly")]
+    assert is_markup("[happy:0.7]") and is_markup("[/sad]") and not is_markup("[tone]")
+    assert emotion_spans("a [beep] b (laughs)") == []
+    for bad, message in [("[happy] hello", "character 1 is never closed"),
+                         ("hello [/happy]", "at character 7 closes a span that was never opened"),
+                         ("[glad:0.5] hi [/glad]", "'[glad:0.5]' at character 1 names no emotion"),
+                         ("[happy:2] hi [/happy]", "intensity"),
+                         ("[sad] a [sad] b [/sad]", "opens [sad] again")]:
+        with pytest.raises(FacegenError, match=message.replace("[", r"\[").replace("]", r"\]")):
+            emotion_spans(bad)
+
+
+def test_a_marked_span_moves_its_words_only(neutral, text):
+    from facegen.arkit.names import ARKIT_NAMES
+
+    base, _ = neutral
+    words = text.split()
+    marked = " ".join(words[:3] + ["[happy]"] + words[3:6] + ["[/happy]"] + words[6:])
+    anim = facegen.animate(WAV, text=marked)
+    spans = anim.metadata["emotion_spans"]
+    assert len(spans) == 1 and spans[0]["label"] == "happy"
+    aligned = anim.metadata["words"]
+    assert spans[0]["start"] == aligned[3]["start"] and spans[0]["end"] == aligned[5]["end"]
+    assert [w["word"] for w in aligned] == [w["word"] for w in base.metadata["words"]]  # unaligned
+    assert "stage_directions" not in anim.metadata
+    smile = fit_arkit(anim).weights[:, ARKIT_NAMES.index("mouthSmileLeft")]
+    t = np.arange(len(smile)) / anim.fps
+    inside = (t > spans[0]["start"] + 0.2) & (t < spans[0]["end"] - 0.2)
+    outside = (t < spans[0]["start"] - 0.3) | (t > spans[0]["end"] + 0.3)
+    assert smile[inside].mean() > 0.5 and smile[outside].mean() < 0.1

@@ -108,6 +108,9 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
 
         check_output(preview)
     transcript = read_text(text, text_file)
+    from facegen.expression import emotion_spans
+
+    emotion_spans(transcript)  # bad markup: before any work
     animator = Animator(model, text_model=text_model, device=device)
     if plan.rig == "arkit":  # ARKit weights need the rig's regions: checked before work
         # the model loads for the check: its transcript's alignment starts first, so the two overlap
