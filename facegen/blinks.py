@@ -23,6 +23,7 @@ anchors.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -95,16 +96,22 @@ def blink_times(duration: float, pauses: list[tuple[float, float]], rate: float 
     mean = 60.0 / rate
     speech = not (len(pauses) == 1 and pauses[0][1] - pauses[0][0] >= duration - 1e-6)
     anchors = [a for a, b in pauses if 0 < a < duration] if speech else []
-    quiet = [(a, b) for a, b in pauses] if speech else []
+    quiet = sorted((a, b) for a, b in pauses) if speech else []
+    starts = [a for a, _ in quiet]
+    anchors = sorted(anchors)
     out: list[Blink] = []
     t = float(rng.uniform(0.1, 0.6)) * mean  # the first blink comes sooner than a full interval
     while t < duration:
-        if anchors and rng.random() < ANCHOR_P:
-            near = [a for a in anchors if abs(a - t) <= ANCHOR_WINDOW * mean]
+        if anchors and rng.random() < ANCHOR_P:  # (bisect: a long clip has thousands of pauses)
+            window = ANCHOR_WINDOW * mean
+            near = anchors[bisect.bisect_left(anchors, t - window):bisect.bisect_right(anchors, t + window)]
             if near:
                 t = min(near, key=lambda a: abs(a - t)) + float(rng.uniform(*REACTION_S))
-        if quiet and not any(a <= t <= b for a, b in quiet):
-            gaps = [(a, b) for a, b in quiet if a - WORD_GAP_S <= t <= b + WORD_GAP_S]
+        # the pauses that may hold t or lie within WORD_GAP_S of it: the last few starting before t + that
+        around = quiet[max(0, bisect.bisect_right(starts, t + WORD_GAP_S) - 8):
+                       bisect.bisect_right(starts, t + WORD_GAP_S)]
+        if quiet and not any(a <= t <= b for a, b in around):
+            gaps = [(a, b) for a, b in around if a - WORD_GAP_S <= t <= b + WORD_GAP_S]
             if gaps:  # inside a word: to the nearest quiet moment
                 a, b = min(gaps, key=lambda g: min(abs(g[0] - t), abs(g[1] - t)))
                 t = min(max(t, a), b)
@@ -126,20 +133,23 @@ def blink_curve(blinks: list[Blink], num_frames: int, fps: float) -> np.ndarray:
     """How shut the lids are at each frame, [num_frames] float32 in [0, 1] (1: shut): each blink closes over
     CLOSE_SHARE of its duration (smoothstep), stays shut for SHUT_SHARE of it but at least over one frame
     time, and opens over the rest (an ease-out)."""
-    t = np.arange(num_frames) / fps
     out = np.zeros(num_frames)
     for blink in blinks:
         close = CLOSE_SHARE * blink.duration
         shut_from = blink.start + close
         shut_to = max(shut_from + SHUT_SHARE * blink.duration, math.floor(shut_from * fps + 1.0) / fps + 1e-9)
         opened = shut_to + blink.duration - close - SHUT_SHARE * blink.duration
+        first, end = max(0, math.floor(blink.start * fps)), min(num_frames, math.ceil(opened * fps) + 1)
+        if first >= end:
+            continue
+        t = np.arange(first, end) / fps  # only the frames it spans: a long clip has thousands of blinks
         x = np.clip((t - blink.start) / close, 0, 1)
         closing = x * x * (3 - 2 * x)
         y = np.clip((t - shut_to) / (opened - shut_to), 0, 1)
         opening = (1 - y) ** 2  # fast at first, slow at the end
         value = np.where(t < shut_from, closing, np.where(t <= shut_to, 1.0, opening))
         value[(t < blink.start) | (t >= opened)] = 0.0
-        out = np.maximum(out, value)
+        out[first:end] = np.maximum(out[first:end], value)
     return out.astype(np.float32)
 
 

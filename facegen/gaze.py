@@ -21,6 +21,7 @@ come from the seed, as the blinks'.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -76,7 +77,8 @@ def saccades(duration: float, pauses: list[tuple[float, float]], seed: int = 0) 
     while True:
         fixation = float(np.clip(rng.gamma(3.0, FIXATION_S / 3.0), 0.3, 2.0))
         nxt = t + fixation
-        onset = next((o for o in onsets if t < o - 0.1 <= nxt), None)
+        i = bisect.bisect_right(onsets, t + 0.1)  # the first onset with t < onset - 0.1
+        onset = onsets[i] if i < len(onsets) and onsets[i] - 0.1 <= nxt else None
         if onset is not None and onset - 0.1 > hold_until:  # planning: look away as speech starts
             start = onset - float(rng.uniform(0.05, 0.2))
             if start >= duration:
@@ -104,15 +106,17 @@ def saccades(duration: float, pauses: list[tuple[float, float]], seed: int = 0) 
 def gaze_curve(found: list[Saccade], num_frames: int, fps: float) -> np.ndarray:
     """(yaw, pitch) in degrees at each frame, [num_frames, 2] float32: held between saccades, each on a
     minimum-jerk profile."""
-    t = np.arange(num_frames) / fps
     out = np.zeros((num_frames, 2))
     here = np.zeros(2)
-    for s in found:
+    for k, s in enumerate(found):  # its frames only, up to the next saccade (a long clip has thousands)
+        first = min(num_frames, max(0, math.ceil(s.start * fps - 1e-9)))
+        end = num_frames if k + 1 == len(found) else min(num_frames, max(first, math.ceil(
+            found[k + 1].start * fps - 1e-9)))
+        t = np.arange(first, end) / fps
         u = np.clip((t - s.start) / s.duration, 0, 1)
         shape = u ** 3 * (10 - 15 * u + 6 * u * u)
         target = np.array([s.yaw, s.pitch])
-        after = t >= s.start
-        out[after] = here + shape[after, None] * (target - here)
+        out[first:end] = here + shape[:, None] * (target - here)
         here = target
     return out.astype(np.float32)
 

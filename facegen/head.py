@@ -59,6 +59,11 @@ def check_amount(amount: float) -> float:
     return float(amount)
 
 
+def _frames(start: float, end: float, fps: float, num_frames: int) -> tuple[int, int]:
+    """The frames from time `start` to `end` (s), within the clip: a long clip's events touch only these."""
+    return max(0, math.floor(start * fps)), min(num_frames, math.ceil(end * fps) + 1)
+
+
 def _ramp(t: np.ndarray, start: float, end: float) -> np.ndarray:
     """0 before `start`, 1 after `end`, a smoothstep between."""
     x = np.clip((t - start) / (end - start), 0, 1)
@@ -78,8 +83,10 @@ def head_motion(samples: np.ndarray, sample_rate: int, pauses: list[tuple[float,
     duration = len(samples) / sample_rate
     t = np.arange(num_frames) / fps
     speaking = np.ones(num_frames, bool)
+    clear = np.ones(len(samples) // (sample_rate // 100) + 1, bool)  # 10 ms steps where a nod may be
     for a, b in pauses:
-        speaking[(t >= a) & (t < b)] = False
+        speaking[math.ceil(a * fps - 1e-9):max(0, math.ceil(b * fps - 1e-9))] = False  # frames in [a, b)
+        clear[max(0, round((a - NOD_CLEAR_S) * 100)):round((b + NOD_CLEAR_S) * 100)] = False
 
     hop = sample_rate // 100
     n = len(samples) // hop
@@ -93,18 +100,20 @@ def head_motion(samples: np.ndarray, sample_rate: int, pauses: list[tuple[float,
         last = -1.0
         for k in np.flatnonzero(is_peak):
             when = k / 100
-            inside = not any(a - NOD_CLEAR_S <= when < b + NOD_CLEAR_S for a, b in pauses)  # nods in speech
-            if not inside or when - last < ACCENT_GAP_S:
+            if not clear[k] or when - last < ACCENT_GAP_S:  # nods in speech, clear of pauses
                 continue
             last = when
             size = np.interp(prominence[k], [ACCENT_DB, 3 * ACCENT_DB], NOD_DEG)
-            out[:, 1] += size * np.exp(-0.5 * ((t - (when - NOD_LEAD_S)) / NOD_WIDTH_S) ** 2)
+            lo, hi = _frames(when - NOD_LEAD_S - 4 * NOD_WIDTH_S, when - NOD_LEAD_S + 4 * NOD_WIDTH_S, fps,
+                             num_frames)
+            out[lo:hi, 1] += size * np.exp(-0.5 * ((t[lo:hi] - (when - NOD_LEAD_S)) / NOD_WIDTH_S) ** 2)
     for a, b in pauses:  # phrase ends
         if b - a >= PHRASE_PAUSE_S and 0 < a < duration - 0.05:
             # into the tilt on the phrase's last syllable, held through the pause, out of it as speech resumes
-            fade = _ramp(t, a - TILT_LEAD_S, a) * (1 - _ramp(t, b, b + TILT_RELEASE_S))
-            out[:, 2] += rng.choice([-1, 1]) * rng.uniform(*TILT_DEG) * fade
-            out[:, 1] -= SETTLE_DEG * fade  # the chin comes up a little as the phrase closes
+            lo, hi = _frames(a - TILT_LEAD_S, b + TILT_RELEASE_S, fps, num_frames)
+            fade = _ramp(t[lo:hi], a - TILT_LEAD_S, a) * (1 - _ramp(t[lo:hi], b, b + TILT_RELEASE_S))
+            out[lo:hi, 2] += rng.choice([-1, 1]) * rng.uniform(*TILT_DEG) * fade
+            out[lo:hi, 1] -= SETTLE_DEG * fade  # the chin comes up a little as the phrase closes
     drift = np.zeros(3)
     for i in range(num_frames):  # Ornstein-Uhlenbeck, slower and smaller in silence
         tau = DRIFT_TAU_S if speaking[i] else 3 * DRIFT_TAU_S
