@@ -119,10 +119,10 @@ def render_animation(
 
     def render_one(t: int) -> np.ndarray:
         frame = np.empty((height, width, 3), np.uint8)
-        renderer.render_into(anim.vertices[t], frame[:, : renderer.width], base_colors)
+        renderer.render_into(_posed(anim, t), frame[:, : renderer.width], base_colors)
         if compare is not None:
             colors = heat_colors(_vertex_errors(anim, compare, t), vmax)
-            renderer.render_into(compare.vertices[t], frame[:, renderer.width :], colors)
+            renderer.render_into(_posed(compare, t), frame[:, renderer.width :], colors)
             frame[overlay[0], overlay[1]] = overlay[2]
         return frame
 
@@ -146,6 +146,18 @@ def render_animation(
         vmax,
         notes,
     )
+
+
+def _posed(anim: Animation, t: int) -> np.ndarray:
+    """Frame `t` as it is seen: the face-local vertices turned with the head (Animation.head) if it moves."""
+    vertices = np.asarray(anim.vertices[t])
+    if anim.head is None:
+        return vertices
+    from facegen.head import rotations
+
+    pivot = np.asarray(anim.head_pivot, np.float64)
+    turned = pivot + (vertices.astype(np.float64) - pivot) @ rotations(anim.head[t:t + 1])[0].T
+    return turned.astype(np.float32)
 
 
 def _vertex_errors(a: Animation, b: Animation, t: int) -> np.ndarray:
@@ -293,7 +305,7 @@ def render_still(
     else:
         if not 0 <= frame < input.num_frames:
             raise FacegenError(f"frame {frame} is outside the clip's 0..{input.num_frames - 1}")
-        vertices, faces, template = input.vertices[frame], input.faces, input.template
+        vertices, faces, template = _posed(input, frame), input.faces, input.template
     colors = face_colors(input.regions, len(vertices))
     image = render_image(vertices, faces, template, size=size, views=check_views(views), colors=colors)
     with atomic_path(path) as tmp:
