@@ -139,3 +139,12 @@ def test_csv_json_and_npy_carry_the_angles(animated, tmp_path):
     assert tmp_path / "a.head.npy" in files
     assert np.array_equal(np.load(tmp_path / "a.head.npy"), anim.head)
     assert np.load(tmp_path / "a.npy").shape == (anim.num_frames, 3 * anim.num_vertices)
+
+
+def test_the_preview_turns_the_head(animated):
+    from facegen.render import _posed
+
+    anim, still = animated
+    frame = int(np.argmax(np.abs(anim.head).sum(1)))
+    assert np.allclose(_posed(anim, frame)[1234], _expected(anim, frame, 1234), atol=1e-5)
+    assert np.array_equal(_posed(still, frame), still.vertices[frame])
