@@ -13,6 +13,7 @@ from helpers import TOY_SPLITS, grid_face, make_bundle, make_dataset
 from facegen.datasets.splits import Splits
 from facegen.errors import FacegenError
 from facegen.evaluate import evaluate, format_table, pool, sequence_metrics
+from facegen.inference import rest_offsets
 from facegen.runtime import SILENT, Reporter
 
 
@@ -116,12 +117,14 @@ def test_evaluate_test_a_uses_each_sequence_own_speaker(toy, bundle_path):
     assert [r["name"] for r in result["per_sequence"]] == ["F2_e06", "F2_e07", "F3_e06", "F3_e07"]
     assert [r["condition"] for r in result["per_sequence"]] == ["F2", "F2", "F3", "F3"]
     json.dumps(result)  # JSON-ready
-    # recompute one sequence by hand: prediction = subject's template + model offsets (speaker F3)
+    # recompute one sequence by hand: prediction = subject's template + model offsets (speaker F3), the
+    # offsets taken from the network's rest (inference.rest_offsets), as facegen animates
     bundle = load_bundle(bundle_path)
     ds = Dataset(toy, reporter=SILENT)
     item = ds.load(ds.sequences(["F3_e07"]), bundle.features, bundle.mel_filters)[0]
     with torch.inference_mode():
         off = bundle.model(torch.from_numpy(item.mel)[None], None, torch.tensor([[0.0, 1.0]]))[0].numpy()
+    off = off - rest_offsets(bundle, 1).reshape(-1, 3)
     gt = item.vertices().reshape(-1, 200, 3)
     lips, upper = read_region(toy / "regions" / "lve.txt"), read_region(toy / "regions" / "fdd.txt")
     expect = sequence_metrics(item.template + off, gt, item.template, lips, upper)
@@ -152,6 +155,7 @@ def test_evaluate_test_b_averages_over_every_training_speaker(toy, bundle_path):
             spk[0, s] = 1
             with torch.inference_mode():
                 off = bundle.model(torch.from_numpy(item.mel)[None], None, spk)[0].numpy()
+            off = off - rest_offsets(bundle, s).reshape(-1, 3)
             gt = item.vertices().reshape(-1, 200, 3)
             rows.append(sequence_metrics(item.template + off, gt, item.template, lips, upper))
     assert rows[0]["lve"] != pytest.approx(rows[1]["lve"])  # the speakers really differ

@@ -102,7 +102,10 @@ def test_a_silent_clip_is_the_neutral_face(animator, tmp_path):
     anim = animator.animate(wav, reporter=Reporter(note=notes.append), fps=30)
     assert anim.num_frames == 60 and anim.metadata["words"] == []
     frames = np.asarray(anim.vertices)
-    assert np.array_equal(frames, np.broadcast_to(anim.template, frames.shape))
+    still = np.concatenate([anim.regions[r] for r in ("lips", "jaw", "mouth_cavity")])
+    rest = np.broadcast_to(anim.template[still], (len(frames), len(still), 3))
+    assert np.array_equal(frames[:, still], rest)  # the mouth at rest; a listening face blinks, looks around
+    assert anim.metadata["blinks"]["times"] and anim.metadata["saccades"]
     assert any("idle clip" in n for n in notes)
     with pytest.raises(FacegenError, match="silent") as info:
         animator.animate(wav, text="hello there")

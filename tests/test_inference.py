@@ -266,7 +266,8 @@ def test_run_batch_writes_every_output_and_reports_failures(bundle, clips, tmp_p
                         reporter=Reporter(progress=said.append))
     assert [r.ok for r in results] == [True, True, False] and "unknown speaker" in results[2].error
     for r in results[:2]:
-        assert r.files == [r.job.output, r.job.output.with_suffix(".wav")]
+        head = r.job.output.with_name(r.job.output.stem + ".head.npy")  # the head's motion beside a .npy
+        assert r.files == [r.job.output, r.job.output.with_suffix(".wav"), head]
         assert np.load(r.job.output).shape == (r.frames, 3 * 23370)
     assert not (tmp_path / "out" / "bad.npy").exists() and len(said) == 3 and said[0].startswith("[1/3]")
 
@@ -334,6 +335,8 @@ def test_silence_is_the_template(tmp_path):
         fit = fit_arkit(anim)
         moved = np.linalg.norm(np.asarray(anim.vertices)[:, lips] - bundle.template.vertices[lips], axis=-1)
         assert np.median(moved) / fit.shapes.mm < 0.3, db  # mm
-        assert fit.weights.mean(0).max() < 0.04, (db, dict(zip(fit.names, fit.weights.mean(0).round(3))))
+        mouth = [i for i, name in enumerate(fit.names) if not name.startswith("eye")]  # the eyes live
+        means = fit.weights.mean(0)
+        assert means[mouth].max() < 0.04, (db, dict(zip(fit.names, means.round(3))))
     offsets = rest_offsets(bundle, 0)
     assert offsets.shape == (bundle.template.vertices.size,) and offsets is rest_offsets(bundle, 0)

@@ -158,7 +158,8 @@ def test_arkit_json_in_parts_is_json_dumps():
     weights = np.random.default_rng(7).uniform(0, 1, (arkit_json.ROWS + 3, 52)).astype(np.float32)
     fit = SimpleNamespace(names=tuple(f"s{i}" for i in range(52)), weights=weights, lip_error_mm=0.1,
                           face_error_mm=0.2)
-    text = "".join(arkit_json._document(SimpleNamespace(fps=25.0, metadata={"model": "m"}), fit, "t.wav"))
+    text = "".join(arkit_json._document(SimpleNamespace(fps=25.0, metadata={"model": "m"}, head=None), fit,
+                                        "t.wav"))
     doc = json.loads(text)
     assert doc["numFrames"] == len(weights) and list(doc)[-2:] == ["weightMat", "facegen"]
     doc["weightMat"] = weights.astype(np.float64).round(arkit_json.DECIMALS).tolist()
