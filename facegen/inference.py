@@ -182,10 +182,11 @@ class FrameStream:
     ndim = 3
 
     def __init__(self, states, weight, base: np.ndarray, block_frames: int = BLOCK_FRAMES,
-                 turns=None) -> None:
+                 turns=None, layers: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         import torch
 
         self.turns = turns  # facegen.gaze.EyeTurns: the eyeballs turned after the affine output, or None
+        self.layers = layers  # (curves [T, K], offsets [K, 3V]) float32 added to the frames, or None
         self._torch = isinstance(states, torch.Tensor) and states.device.type != "cpu"
         if self._torch:
             self._states = states.float()
@@ -228,6 +229,9 @@ class FrameStream:
         else:
             np.matmul(self._states[start:stop], self._weight.T, out=flat)
             flat += self._base
+        if self.layers is not None:
+            curves, offsets = self.layers
+            flat += curves[start:stop] @ offsets
         if self.turns is not None:
             self.turns.apply(start, out)
         self.blocks_computed += 1
@@ -243,30 +247,31 @@ class FrameStream:
 
     def with_layers(self, curves: np.ndarray, offsets: np.ndarray) -> FrameStream:
         """This stream plus layers: frame t gains sum_k curves[t, k] * offsets[k] (`curves` [T, K], `offsets`
-        [K, 3V]), e.g. blinks. The layers join the output layer as K more states and weights, so `project`,
-        `every` and the blocks see them as they see the network's motion."""
+        [K, 3V]), e.g. blinks; `project`, `every` and the blocks see them as they see the network's motion
+        (the network's weights are shared, not copied)."""
         curves = np.asarray(curves, np.float32).reshape(len(self), -1)
         offsets = np.asarray(offsets, np.float32).reshape(curves.shape[1], -1)
-        if self._torch:
-            import torch
+        if self.layers is not None:
+            curves = np.concatenate([self.layers[0], curves], 1)
+            offsets = np.concatenate([self.layers[1], offsets])
+        return self._with(turns=self.turns, layers=(curves, offsets))
 
-            device = self._states.device
-            states = torch.cat([self._states, torch.from_numpy(curves).to(device)], 1)
-            weight = torch.cat([self._weight, torch.from_numpy(offsets.T.copy()).to(device)], 1)
-            base = self._base.cpu().numpy()
-        else:
-            states = np.concatenate([self._states, curves], 1)
-            weight, base = np.concatenate([self._weight, offsets.T], 1), self._base
-        return FrameStream(states, weight, base, self.block_frames, self.turns)
+    def _with(self, states=None, turns=None, layers=None) -> FrameStream:
+        """A stream on these weights (its states `states`, default these) with `turns` and `layers`."""
+        out = FrameStream.__new__(FrameStream)
+        out.__dict__.update(self.__dict__)
+        out._states = self._states if states is None else states
+        out.turns, out.layers, out._cached, out.blocks_computed = turns, layers, None, 0
+        return out
 
     def with_turns(self, turns) -> FrameStream:
         """This stream with its eyeballs turned by `turns` (facegen.gaze.EyeTurns)."""
-        return FrameStream(self._states, self._weight, self._base, self.block_frames, turns)
+        return self._with(turns=turns, layers=self.layers)
 
     def every(self, step: int) -> FrameStream:
         """The stream of every `step`-th frame (the same weights; its states a copy of theirs)."""
-        return FrameStream(self._states[::step], self._weight, self._base, self.block_frames,
-                           None if self.turns is None else self.turns.every(step))
+        return self._with(self._states[::step], None if self.turns is None else self.turns.every(step),
+                          None if self.layers is None else (self.layers[0][::step], self.layers[1]))
 
     def project(self, basis: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """(frames - origin) @ basis.T for every frame, [T, K] float64, for `basis` [K, 3V] and `origin` [3V],
@@ -285,12 +290,18 @@ class FrameStream:
         out = np.empty((len(states), len(basis)))
         for s in range(0, len(states), 8192):
             out[s:s + 8192] = states[s:s + 8192].astype(np.float64) @ through + offset
+        if self.layers is not None:
+            curves, offsets = self.layers
+            out += curves.astype(np.float64) @ (offsets.astype(np.float64) @ basis.T.astype(np.float64))
         if self.turns is not None:  # the eyeballs' turn, computed on their points only
             rows = (self.turns.indices[:, None] * 3 + np.arange(3)).reshape(-1)
             w, b, sub = weight[rows].astype(np.float64), base[rows].astype(np.float64), basis[:, rows]
+            extra = None if self.layers is None else self.layers[1][:, rows].astype(np.float64)
             for s in range(0, len(states), 4096):
-                points = (states[s:s + 4096].astype(np.float64) @ w.T + b).reshape(
-                    -1, len(self.turns.indices), 3)
+                flat = states[s:s + 4096].astype(np.float64) @ w.T + b
+                if extra is not None:
+                    flat += self.layers[0][s:s + 4096].astype(np.float64) @ extra
+                points = flat.reshape(-1, len(self.turns.indices), 3)
                 moved = self.turns.turn(s, points) - points
                 out[s:s + 4096] += moved.reshape(len(points), -1) @ sub.T.astype(np.float64)
         return out

@@ -35,10 +35,11 @@ def add_layers(clip, stream, fps: float):
     gaze = gaze_curve(clip.saccades, frames, fps)
     if clip.saccades:
         eyes = np.concatenate([clip.mesh.regions["left_eyeball"], clip.mesh.regions["right_eyeball"]])
+        follow = lid_curves(gaze)
         for k, name in enumerate(("eyeLookUp", "eyeLookDown")):  # their lids only: the eyes turn below
             lids = shapes.offset(name + "Left") + shapes.offset(name + "Right")
             lids[eyes] = 0.0
-            curves.append(lid_curves(gaze)[:, k])
+            curves.append(follow[:, k])
             offsets.append(lids)
     mood = emotion_offsets(clip.emotion, clip.mesh)
     if mood is not None:

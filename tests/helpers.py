@@ -322,3 +322,17 @@ def rig_weights(frames: int, **channels) -> np.ndarray:
     for name, value in channels.items():
         w[:, CHANNELS.index(name)] = value
     return w
+
+
+def phrase_pauses(seconds: float, seed: int = 0, first: float = 0.3,
+                  gap: tuple[float, float] = (0.25, 0.9)) -> list[tuple[float, float]]:
+    """Pauses (start, end) of read speech: a pause of `first` s, then phrases of 1.5-4 s between pauses of
+    `gap` s (what facegen.blinks and facegen.gaze time their events by)."""
+    rng = np.random.default_rng(seed)
+    pauses, t = [(0.0, first)], first
+    while t < seconds:
+        t += rng.uniform(1.5, 4.0)
+        length = rng.uniform(*gap)
+        pauses.append((t, min(t + length, seconds)))
+        t += length
+    return pauses

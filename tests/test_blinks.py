@@ -9,28 +9,17 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import phrase_pauses
 
 from facegen import blinks
 from facegen.blinks import Blink, blink_curve, blink_stats, blink_times
 from facegen.errors import FacegenError
 
 
-def _speech_pauses(seconds: float, seed: int = 0) -> list[tuple[float, float]]:
-    """Pauses of read speech: phrases of 1.5-4 s between pauses of 0.25-0.9 s."""
-    rng = np.random.default_rng(seed)
-    pauses, t = [(0.0, 0.3)], 0.3
-    while t < seconds:
-        t += rng.uniform(1.5, 4.0)
-        gap = rng.uniform(0.25, 0.9)
-        pauses.append((t, min(t + gap, seconds)))
-        t += gap
-    return pauses
-
-
 def test_blinks_during_speech_follow_its_pauses_at_the_rate_asked():
     rates, near, cvs = [], [], []
     for seed in range(8):
-        pauses = _speech_pauses(60.0, seed)
+        pauses = phrase_pauses(60.0, seed)
         found = blink_times(60.0, pauses, seed=seed)
         curve = blink_curve(found, 1500, 25.0)
         stats = blink_stats(curve, 25.0, pauses)
@@ -45,7 +34,7 @@ def test_blinks_during_speech_follow_its_pauses_at_the_rate_asked():
 
 
 def test_rate_seed_and_doubles():
-    pauses = _speech_pauses(600.0)
+    pauses = phrase_pauses(600.0)
     assert blink_times(600.0, pauses, rate=0) == []
     assert blink_times(600.0, pauses, seed=3) == blink_times(600.0, pauses, seed=3)
     assert blink_times(600.0, pauses, seed=3) != blink_times(600.0, pauses, seed=4)

@@ -9,23 +9,13 @@ import math
 
 import numpy as np
 import pytest
+from helpers import phrase_pauses
 
 from facegen.gaze import Saccade, gaze_curve, saccade_duration, saccades
 
 
-def _pauses(seconds: float, seed: int = 0) -> list[tuple[float, float]]:
-    rng = np.random.default_rng(seed)
-    pauses, t = [(0.0, 0.6)], 0.6
-    while t < seconds:
-        t += rng.uniform(1.5, 4.0)
-        gap = rng.uniform(0.25, 1.0)
-        pauses.append((t, min(t + gap, seconds)))
-        t += gap
-    return pauses
-
-
 def test_saccades_follow_the_main_sequence_and_the_speech():
-    pauses = _pauses(120.0)
+    pauses = phrase_pauses(120.0, first=0.6, gap=(0.25, 1.0))
     found = saccades(120.0, pauses, seed=1)
     assert found == saccades(120.0, pauses, seed=1) and found != saccades(120.0, pauses, seed=2)
     assert len(found) >= 120 / 4  # at least one per 4 s
