@@ -77,6 +77,8 @@ class Clip(NetworkInput):
     head_pivot: np.ndarray | None = None
     emotion: Emotion | None = None  # over the whole clip (facegen.expression)
     emotion_spans: list | None = None  # (Emotion, start s, end s) marked in the transcript
+    strength: dict | None = None  # the network's motion scaled by region (facegen.strength), None: as it is
+    strength_scales: np.ndarray | None = None  # [V], per vertex
 
 
 class Animator:
@@ -182,7 +184,8 @@ class Animator:
                 fps: float | None = None, reporter: Reporter = SILENT, aligned: Aligned | None = None,
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                emotion: str | Emotion | None = None, head_motion: float = 1.0) -> Clip:
+                emotion: str | Emotion | None = None, head_motion: float = 1.0,
+                strength=None) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
@@ -191,6 +194,9 @@ class Animator:
 
         blink_rate, seed, emotion = check_blink_rate(blink_rate), check_seed(seed), parse_emotion(emotion)
         head_motion = check_amount(head_motion)
+        from facegen.strength import parse_strength
+
+        strength = parse_strength(strength)
         from facegen.expression import emotion_spans, is_markup, span_times
 
         spans = emotion_spans(text)  # bad markup: before any work
@@ -201,7 +207,11 @@ class Animator:
                                  on_mismatch=on_mismatch)
             clip.fps = check_fps(fps)
             clip.blink_rate, clip.seed, clip.emotion = blink_rate, seed, emotion
-            clip.head_motion = head_motion
+            clip.head_motion, clip.strength = head_motion, strength
+            if strength is not None:  # a face without the regions it scales: refused before the network
+                from facegen.strength import region_scales
+
+                clip.strength_scales = region_scales(clip.mesh, strength)
             if text:
                 from facegen.words import split_directions
 
@@ -338,8 +348,10 @@ class Animator:
             for i, states in zip(ids, self.states([clips[i] for i in ids]), strict=True):
                 clip = clips[i]  # at another frame rate: the states resampled (a no-op at the network's)
                 states = states_at_rate(states, fps, clip.fps or fps, output_frames(clip))
-                out[i] = self.animation(clip, self.layered(clip, frame_stream(
-                    self.bundle, states, clip.mesh.vertices, speaker=clip.speaker)))
+                stream = frame_stream(self.bundle, states, clip.mesh.vertices, speaker=clip.speaker)
+                if clip.strength_scales is not None:
+                    stream = stream.with_scale(clip.strength_scales, clip.mesh.vertices)
+                out[i] = self.animation(clip, self.layered(clip, stream))
         return out
 
     def layered(self, clip: Clip, stream):
@@ -378,6 +390,7 @@ class Animator:
                 **({"emotion": clip.emotion.as_dict()} if clip.emotion is not None else {}),
                 **({"emotion_spans": [{**e.as_dict(), "start": round(a, 4), "end": round(b, 4)}
                                       for e, a, b in clip.emotion_spans]} if clip.emotion_spans else {}),
+                **({"strength": clip.strength} if clip.strength else {}),
                 "head_motion": {"amount": clip.head_motion, **({} if clip.head is None else {
                     "rms_deg": [round(float(x), 3) for x in np.sqrt(np.mean(clip.head ** 2, 0))]})},
             },
@@ -391,7 +404,8 @@ class Animator:
                 fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                emotion: str | Emotion | None = None, head_motion: float = 1.0) -> Animation:
+                emotion: str | Emotion | None = None, head_motion: float = 1.0,
+                strength=None) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
@@ -401,7 +415,7 @@ class Animator:
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                 template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
                                 on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed, emotion=emotion,
-                                head_motion=head_motion)
+                                head_motion=head_motion, strength=strength)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -418,7 +432,8 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             device: str = "auto", fps: float | None = None, stream: bool = False, reporter: Reporter = SILENT,
             meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
             blink_rate: float = DEFAULT_RATE, seed: int = 0,
-            emotion: str | Emotion | None = None, head_motion: float = 1.0) -> Animation:
+            emotion: str | Emotion | None = None, head_motion: float = 1.0,
+            strength=None) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -442,11 +457,13 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     disgusted, neutral; intensity 0-1, default 1) over the whole clip, on top of what the words do.
     `head_motion`: how much the head moves with the prosody (facegen.head: nods, tilts, drift; 0: still,
     1: as people move theirs, up to 3), as `Animation.head` (the vertices stay face-local).
+    `strength`: "lips=1.2,jaw=0.8,upper=1.5" or a dict: the network's motion scaled by region
+    (facegen.strength; 0-3, 1: as it is; the blinks, gaze, emotion and head keep their own controls).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
         stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch, blink_rate=blink_rate,
-        seed=seed, emotion=emotion, head_motion=head_motion)
+        seed=seed, emotion=emotion, head_motion=head_motion, strength=strength)
 
 
 MAX_FPS = 240.0  # output frames per second at most

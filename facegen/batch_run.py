@@ -62,7 +62,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  text_model: str | None = None, device: str = "auto", batch_size: int = 16,
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
                  on_mismatch: str = "error", blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                 emotion: str | None = None, head_motion: float = 1.0,
+                 emotion: str | None = None, head_motion: float = 1.0, strength=None,
                  on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
@@ -74,7 +74,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     "error" refuses a line whose transcript does not match its speech, "warn" writes it and flags it in
     the reports (each item's "match" holds its score either way: facegen.transcript_match); `blink_rate`
     and `seed`: every item's blinks (facegen.blinks); `emotion`: every item's (facegen.expression), where
-    its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head).
+    its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head); `strength`:
+    every item's region scales (facegen.strength), where its row has no 'strength' of its own.
     `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
     ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
@@ -97,6 +98,9 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     from facegen.head import check_amount
 
     head_motion = check_amount(head_motion)
+    from facegen.strength import parse_strength
+
+    strength = parse_strength(strength)
     if on_mismatch not in ON_MISMATCH:
         raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
                            param="on_mismatch")
@@ -112,6 +116,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         job.blink_rate, job.seed = blink_rate, seed
         job.emotion = job.emotion if job.emotion is not None else emotion
         job.head_motion = head_motion
+        job.strength = job.strength if job.strength is not None else strength
         job.options = {"mode": usd_mode} if usd_mode else {}
         job.audio = Path(os.path.abspath(job.audio))
         job.alignment = Path(os.path.abspath(job.alignment)) if job.alignment is not None else None

@@ -186,6 +186,7 @@ class FrameStream:
         import torch
 
         self.turns = turns  # facegen.gaze.EyeTurns: the eyeballs turned after the affine output, or None
+        self.scale = None  # (per-coordinate scales [3V], origin [3V]) of the network's motion, or None
         self.layers = layers  # (curves [T, K], offsets [K, 3V]) float32 added to the frames, or None
         self._torch = isinstance(states, torch.Tensor) and states.device.type != "cpu"
         if self._torch:
@@ -229,6 +230,11 @@ class FrameStream:
         else:
             np.matmul(self._states[start:stop], self._weight.T, out=flat)
             flat += self._base
+        if self.scale is not None:  # origin + scales * (the network's frame - origin)
+            scales, origin = self.scale
+            flat -= origin
+            flat *= scales
+            flat += origin
         if self.layers is not None:
             curves, offsets = self.layers
             flat += curves[start:stop] @ offsets
@@ -264,6 +270,16 @@ class FrameStream:
         out.turns, out.layers, out._cached, out.blocks_computed = turns, layers, None, 0
         return out
 
+    def with_scale(self, scales: np.ndarray, origin: np.ndarray) -> FrameStream:
+        """This stream with the network's motion about `origin` ([V, 3], the template) scaled per vertex by
+        `scales` [V] (facegen.strength); layers and turns added after it are not scaled."""
+        if self.layers is not None or self.turns is not None:
+            raise ValueError("scale a stream before adding layers or turns")
+        out = self._with(turns=None, layers=None)
+        out.scale = (np.repeat(np.asarray(scales, np.float32), 3),
+                     np.ascontiguousarray(origin, np.float32).reshape(-1))
+        return out
+
     def with_turns(self, turns) -> FrameStream:
         """This stream with its eyeballs turned by `turns` (facegen.gaze.EyeTurns)."""
         return self._with(turns=turns, layers=self.layers)
@@ -281,11 +297,18 @@ class FrameStream:
         weight, base = self._weight, self._base
         if self._torch:
             weight, base = weight.cpu().numpy(), base.cpu().numpy()
+        on_net = basis if self.scale is None else basis * self.scale[0]  # what the network's motion meets
         through = np.zeros((weight.shape[1], len(basis)))
         for s in range(0, len(weight), 8192):  # in float64, a slice of W at a time
-            through += weight[s:s + 8192].T.astype(np.float64) @ basis[:, s:s + 8192].T.astype(np.float64)
-        offset = (base.astype(np.float64) - np.asarray(origin, np.float64).reshape(-1)) @ basis.T.astype(
-            np.float64)
+            through += weight[s:s + 8192].T.astype(np.float64) @ on_net[:, s:s + 8192].T.astype(np.float64)
+        if self.scale is None:
+            offset = (base.astype(np.float64) - np.asarray(origin, np.float64).reshape(-1)) @ basis.T.astype(
+                np.float64)
+        else:
+            scaled_from = self.scale[1].astype(np.float64)
+            to_origin = scaled_from - np.asarray(origin, np.float64).reshape(-1)
+            offset = ((base.astype(np.float64) - scaled_from) @ on_net.T.astype(np.float64)
+                      + to_origin @ basis.T.astype(np.float64))
         states = self._states.cpu().numpy() if self._torch else self._states
         out = np.empty((len(states), len(basis)))
         for s in range(0, len(states), 8192):
@@ -299,6 +322,9 @@ class FrameStream:
             extra = None if self.layers is None else self.layers[1][:, rows].astype(np.float64)
             for s in range(0, len(states), 4096):
                 flat = states[s:s + 4096].astype(np.float64) @ w.T + b
+                if self.scale is not None:
+                    scaled_from = self.scale[1][rows].astype(np.float64)
+                    flat = scaled_from + self.scale[0][rows] * (flat - scaled_from)
                 if extra is not None:
                     flat += self.layers[0][s:s + 4096].astype(np.float64) @ extra
                 points = flat.reshape(-1, len(self.turns.indices), 3)

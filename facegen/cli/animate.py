@@ -66,6 +66,9 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--emotion", metavar="LABEL[:INTENSITY]",
               help="An emotion over the whole clip, on top of what the words do: neutral, happy, sad, angry, "
                    "surprised, afraid or disgusted, intensity 0-1 (default 1), e.g. happy:0.6.")
+@click.option("--strength", metavar="REGION=SCALE,...",
+              help="Scale the model's motion by region: lips, jaw (the rest of the lower face), upper "
+                   "(brows, lids, forehead), 0-3 each (1 = as it is), e.g. lips=1.2,jaw=0.8,upper=1.5.")
 @click.option("--preview", type=click.Path(dir_okay=False),
               help="Also render a preview video (.mp4) with sound.")
 @click.option("--device", type=DEVICE, default="auto", show_default=True,
@@ -73,7 +76,7 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed,
-            head_motion, emotion, preview, device, quiet):
+            head_motion, emotion, strength, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
@@ -81,18 +84,22 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
     with output_folders(output, preview):  # made as needed, removed again when nothing is written
         _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
                  usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet,
-                 blink_rate=blink_rate, seed=seed, emotion=emotion, head_motion=head_motion)
+                 blink_rate=blink_rate, seed=seed, emotion=emotion, head_motion=head_motion,
+                 strength=strength)
 
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
              usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
-             blink_rate, seed, emotion, head_motion):
+             blink_rate, seed, emotion, head_motion, strength):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
     from facegen.expression import parse_emotion
 
     emotion = parse_emotion(emotion)  # a bad label or intensity: before any work
+    from facegen.strength import parse_strength
+
+    strength = parse_strength(strength)
 
     options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig),
                                  ("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None}
@@ -122,7 +129,7 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
                             template=template, fps=fps, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer, on_mismatch=on_mismatch, blink_rate=blink_rate,
-                            seed=seed, emotion=emotion, head_motion=head_motion)
+                            seed=seed, emotion=emotion, head_motion=head_motion, strength=strength)
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it

@@ -58,6 +58,9 @@ def write_fitted(anim: Animation, path: str | os.PathLike,
 ROWS = 4096  # weightMat rows turned into text at a time: a long clip's rows never exist as Python floats
 
 
+CONTROLS = ("blinks", "emotion", "emotion_spans", "strength", "head_motion")  # the run's controls, kept
+
+
 def _document(anim: Animation, fit: Fit, track: str) -> Iterator[str]:
     """The JSON text in parts: the text of json.dumps, with weightMat's rows made a block at a time."""
     doc = {
@@ -73,7 +76,7 @@ def _document(anim: Animation, fit: Fit, track: str) -> Iterator[str]:
             "lip_error_mm": round(fit.lip_error_mm, 4),
             "face_error_mm": round(fit.face_error_mm, 4),
             "audio": track or None,
-            **({"blinks": anim.metadata["blinks"]} if "blinks" in anim.metadata else {}),
+            **{k: anim.metadata[k] for k in CONTROLS if k in anim.metadata},
         },
         **({} if anim.head is None else {"facegenHead": {
             "angles": ["yaw", "pitch", "roll"], "units": "degrees", "order": "Ry(yaw) Rx(pitch) Rz(roll)",
