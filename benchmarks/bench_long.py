@@ -6,7 +6,8 @@ Targets: a 2-hour recording animates to .json and .npy (and aligns) in ≤ 1.5 G
 No hour of recorded speech with its transcript is on the machine, so the recording is made of what is:
 Asterisk's recorded prompts with their script (Debian: `apt-get install asterisk-core-sounds-en-wav
 asterisk-core-sounds-en`; else sentences spoken by libespeak-ng), in a shuffled loop, separated by pauses of
-0.2-1.2 s over a faint noise floor; the transcript is written beside it. The file is written block by block,
+0.2-1.2 s over a faint noise floor; the transcript is written beside it, and NAME.lines.tsv with each line's
+start and end (s). The file is written block by block,
 so making two hours at 48 kHz stereo takes little memory.
 
 Each command runs as a new process. "own MB" is its peak RSS as os.wait4 gives it (the largest of the process
@@ -71,7 +72,7 @@ def make_long(path: Path, seconds: float, rate: int = RATE, channels: int = 1, s
 
     rng = np.random.default_rng(seed)
     bank = speech_bank()
-    words, total = [], 0
+    words, total, lines = [], 0, []
     with sf.SoundFile(path, "w", samplerate=rate, channels=channels, subtype="PCM_16") as out:
         while total < seconds * RATE:
             for k in rng.permutation(len(bank)):
@@ -82,11 +83,13 @@ def make_long(path: Path, seconds: float, rate: int = RATE, channels: int = 1, s
                 piece = resample(piece, RATE, rate) if rate != RATE else piece
                 out.write(np.repeat(piece[:, None], channels, axis=1) if channels > 1 else piece)
                 words.append(text)
+                lines.append(f"{total / RATE:.3f}\t{(total + len(audio)) / RATE:.3f}\t{text}")
                 total += len(audio) + pause
                 if total >= seconds * RATE:
                     break
     txt = path.with_suffix(".txt")
     txt.write_text(" ".join(words) + "\n")
+    path.with_suffix(".lines.tsv").write_text("\n".join(lines) + "\n")  # where each line is: the truth
     return txt
 
 

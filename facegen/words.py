@@ -247,7 +247,8 @@ def normalize_transcript(text: str) -> list[tuple[str, list[str]]]:
     """For each whitespace-separated word of `text`: (the word, edge punctuation stripped; its spoken tokens).
 
     Spoken tokens are lower case without punctuation, numbers spelled out ("42" → ["forty", "two"],
-    "3rd" → ["third"], "$5" → ["five", "dollars"], a 5,000-digit number digit by digit, "①" → ["one"]).
+    "3rd" → ["third"], "$5" → ["five", "dollars"], a 5,000-digit number digit by digit, "①" → ["one"]; an
+    identifier such as "extension 1234" digit by digit: DIGIT_KEYS).
     Words made only of punctuation are left out, and so are stage directions (`split_directions`).
     """
     out = []
@@ -256,9 +257,23 @@ def normalize_transcript(text: str) -> list[tuple[str, list[str]]]:
         if not word:
             continue
         spoken = _spoken(word)
+        if out and _said_as_digits(out[-1][0], word):
+            spoken = _digits(word)
         if spoken:
             out.append((word, spoken))
     return out
+
+
+# words after which a number of DIGITS_AFTER_KEY digits or more names something and is said digit by digit
+# ("extension 1234" → one two three four, "password 4242", "PIN 0815"), not as a quantity or a year
+DIGIT_KEYS = frozenset({"extension", "ext", "password", "passcode", "pin", "code", "id", "account", "phone",
+                        "number", "no", "zip", "flight", "room", "mailbox", "box", "dial"})
+DIGITS_AFTER_KEY = 4
+
+
+def _said_as_digits(before: str, word: str) -> bool:
+    return (word.isascii() and word.isdigit() and len(word) >= DIGITS_AFTER_KEY
+            and before.lower().rstrip(".#:") in DIGIT_KEYS)
 
 
 def check_word_rate(words: int, duration: float, what: str) -> None:
