@@ -28,6 +28,7 @@ _POS_CHARACTER = 1
 _CHARS_UTF8 = 1
 _EVENT_LIST_TERMINATED, _EVENT_WORD, _EVENT_PHONEME = 0, 1, 7
 _PARAM_RATE, _PARAM_PITCH = 1, 3
+_PHONEMES_IPA = 0x02  # espeak_TextToPhonemes: IPA instead of mnemonics
 
 
 class _EventId(ctypes.Union):
@@ -269,14 +270,15 @@ def _split(phones: list, counts: list[int], own: int) -> list[list]:
     return parts
 
 
-def phonemize(word: str, voice: str = "en-us") -> list[str]:
-    """espeak's phonemes (mnemonics, stress marks kept) for `word` — a grapheme-to-phoneme step."""
+def phonemize(word: str, voice: str = "en-us", ipa: bool = False) -> list[str]:
+    """espeak's phonemes (mnemonics, stress marks kept; `ipa`: in the IPA, stress and length marks kept) for
+    `word` — a grapheme-to-phoneme step."""
     es = espeak()
     out: list[str] = []
     with es.lock:
         es.set_voice(voice)
         buf = ctypes.c_char_p(word.encode("utf-8"))
-        mode = ord("|") << 8  # bits 8-23: separator between phoneme names
+        mode = (ord("|") << 8) | (_PHONEMES_IPA if ipa else 0)  # bits 8-23: separator between phoneme names
         while buf.value:
             result = es.lib.espeak_TextToPhonemes(ctypes.byref(buf), _CHARS_UTF8, mode)
             if result is None:

@@ -126,6 +126,84 @@ def espeak_to_cmu(phonemes: Sequence[str]) -> list[str]:
     return out
 
 
+# ----------------------------------------------------------------------------------------- IPA → CMU
+# Any language espeak-ng reads gives its phones in the IPA (facegen.espeak.phonemize(ipa=True)). A phone with
+# a CMU counterpart maps to it (CMU_IPA, IPA_ALIASES); any other goes to the CMU phone nearest in the
+# articulatory features of panphon (a well-kept IPA feature table), weighted by what shows on the lips and jaw
+# (VISIBLE_WEIGHTS: labial, round, high, low, back, syllabic ...): French /y/ rounds (UW), a Spanish /β/
+# between vowels ([β]) a labial that does not close as /b/ does (V), /ʁ/ is made at the back (HH), not a
+# rounded English R.
+CMU_IPA = {"AA": "ɑ", "AE": "æ", "AH": "ʌ", "AO": "ɔ", "AW": "aʊ", "AY": "aɪ", "EH": "ɛ", "ER": "ɝ",
+           "EY": "eɪ", "IH": "ɪ", "IY": "i", "OW": "oʊ", "OY": "ɔɪ", "UH": "ʊ", "UW": "u",
+           "B": "b", "CH": "tʃ", "D": "d", "DH": "ð", "F": "f", "G": "ɡ", "HH": "h", "JH": "dʒ", "K": "k",
+           "L": "l", "M": "m", "N": "n", "NG": "ŋ", "P": "p", "R": "ɹ", "S": "s", "SH": "ʃ", "T": "t",
+           "TH": "θ", "V": "v", "W": "w", "Y": "j", "Z": "z", "ZH": "ʒ"}
+IPA_ALIASES = {"ə": "AH", "ɐ": "AH", "ɜ": "ER", "ɚ": "ER", "a": "AA", "e": "EY", "o": "OW", "g": "G",
+               "ɾ": "D", "ɫ": "L", "ʧ": "CH", "ʤ": "JH", "ts": "T S", "dz": "D Z", "ɹ̩": "ER", "ʍ": "W",
+               "β": "V", "ɸ": "F", "ʋ": "V", "ø": "OW"}  # lips that near but do not close: not B, P
+VISIBLE_WEIGHTS = {"syl": 3.0, "cons": 2.0, "lab": 3.0, "round": 3.0, "lo": 2.0, "hi": 2.0, "back": 1.5,
+                   "cor": 1.5, "ant": 1.0, "son": 1.0, "cont": 1.0, "lat": 1.0, "strid": 1.0, "distr": 0.5,
+                   "nas": 0.5, "delrel": 0.5}
+_IPA_MARKS = str.maketrans("", "", "ˈˌːˑ‿̯͡")
+_IPA_CACHE: dict[str, tuple[str, ...]] = {}
+
+
+def ipa_to_cmu(phones: Sequence[str]) -> list[str]:
+    """Map IPA phones (one string each, stress and length marks allowed) to pocketsphinx (CMU) phones; what
+    panphon cannot read is skipped."""
+    out: list[str] = []
+    for ph in phones:
+        key = ph.translate(_IPA_MARKS)
+        if key not in _IPA_CACHE:
+            _IPA_CACHE[key] = _nearest_cmu(key)
+        for p in _IPA_CACHE[key]:
+            if not out or out[-1] != p or p not in CMU_CONSONANTS:
+                out.append(p)
+    return out
+
+
+def _nearest_cmu(ipa: str) -> tuple[str, ...]:
+    direct = {v: k for k, v in CMU_IPA.items()} | IPA_ALIASES
+    if ipa in direct:
+        return tuple(direct[ipa].split())
+    table = _feature_table()
+    if table is None:
+        return ()
+    ft, weights, singles = table
+    found = []
+    for segment in ft.ipa_segs(ipa):
+        vectors = ft.word_to_vector_list(segment, numeric=True)
+        if not vectors:
+            continue
+        v = np.asarray(vectors[0], np.float64)
+        if segment in direct:
+            found += direct[segment].split()
+            continue
+        cost = {p: float(np.sum(weights * np.abs(v - u))) for p, u in singles.items()}
+        found.append(min(cost, key=cost.get))
+    return tuple(found)
+
+
+_TABLE: list = []
+
+
+def _feature_table():
+    """(panphon FeatureTable, feature weights, {CMU phone: feature vector} of the one-segment CMU phones),
+    built once; None without panphon."""
+    if not _TABLE:
+        try:
+            import panphon
+        except ImportError:
+            _TABLE.append(None)
+            return None
+        ft = panphon.FeatureTable()
+        weights = np.array([VISIBLE_WEIGHTS.get(n, 0.2) for n in ft.names])
+        singles = {p: np.asarray(ft.word_to_vector_list(ipa, numeric=True)[0], np.float64)
+                   for p, ipa in CMU_IPA.items() if len(ft.ipa_segs(ipa)) == 1}
+        _TABLE.append((ft, weights, singles))
+    return _TABLE[0]
+
+
 # ------------------------------------------------------------------------- Flite/Festival phones → CMU
 # The radio phone set of Flite's and Festival's US voices -> CMU without stress (their pauses: is_pause).
 RADIO_TO_CMU = {p: p.upper() for p in (
