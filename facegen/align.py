@@ -46,7 +46,7 @@ from facegen.sphinx import (
     pcm_bytes,
 )
 from facegen.transcript_match import UNALIGNED, Match, judge, mismatch, speech_snr_db
-from facegen.words import Word, check_word_rate, no_words, normalize_transcript, spelled
+from facegen.words import Word, check_word_rate, no_words, spelled, spoken_words
 
 Phone = tuple[str, float, float]  # (CMU phone without stress, start s, end s)
 
@@ -94,20 +94,21 @@ def _free_gaps(pcm: bytes, n_frames: int, cmn: str) -> np.ndarray | None:
     return gaps
 
 
-def align(audio: np.ndarray, sample_rate: int, transcript: str) -> list[Word]:
+def align(audio: np.ndarray, sample_rate: int, transcript: str, language: str = "en") -> list[Word]:
     """Word start/end times (s) of `transcript` in `audio` (mono, any rate), by forced alignment.
 
     Returns one Word per written word of the transcript (words made only of punctuation are left
     out), in order, with the user's spelling. Raises FacegenError for an empty transcript, silent or
     too short audio, or a transcript that does not match the speech.
     """
-    return checked(align_checked(audio, sample_rate, transcript, with_phones=False)).words
+    return checked(align_checked(audio, sample_rate, transcript, False, language)).words
 
 
-def align_phones(audio: np.ndarray, sample_rate: int, transcript: str) -> tuple[list[Word], list[Phone]]:
+def align_phones(audio: np.ndarray, sample_rate: int, transcript: str,
+                 language: str = "en") -> tuple[list[Word], list[Phone]]:
     """The words of `align` and the phones inside them: (CMU phone without stress, start, end) in seconds,
     pauses left out — pocketsphinx's phone alignment of the same search (a second pass over the audio)."""
-    found = checked(align_checked(audio, sample_rate, transcript, with_phones=True))
+    found = checked(align_checked(audio, sample_rate, transcript, True, language))
     return found.words, found.phones
 
 
@@ -118,17 +119,24 @@ def checked(found: Alignment) -> Alignment:
     return found
 
 
-def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_phones: bool) -> Alignment:
+def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_phones: bool,
+                  language=None) -> Alignment:
     """The words (and phones, `with_phones`) of `transcript` in `audio` and how well it matches the speech,
     without refusing a mismatch (its `match.problem` says what is wrong: `checked` refuses it). Raises
     FacegenError where no alignment exists (no words, silent or too short audio, words that cannot be placed).
+    `language` (a code of facegen.languages; None: English): its words said with espeak-ng's pronunciation in
+    that language, in these phones (sphinx.dictionary_word); its mismatch bound FOREIGN_WORD_GAP.
     """
-    entries = normalize_transcript(transcript)
+    from facegen.languages import check_language
+
+    language = check_language(language)
+    foreign = language.code != "en"
+    entries = spoken_words(transcript, language.code)
     if not entries:
         raise no_words(transcript)
-    # (its word's index, token, its letters when it may be said letter by letter)
-    spoken = [(i, token, spelled(word, token)) for i, (word, tokens) in enumerate(entries)
-              for token in tokens]
+    # (its word's index, token, its letters when it may be said letter by letter, or the voice it is said in)
+    spoken = [(i, token, language.voice if foreign else spelled(word, token))
+              for i, (word, tokens) in enumerate(entries) for token in tokens]
     check_word_rate(len(spoken), len(audio) / sample_rate, "the transcript")  # "1234": four words said
     audio = pcm16k(audio, sample_rate)
     pcm = pcm_bytes(audio)
@@ -186,7 +194,7 @@ def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_pho
     start, end = speech_edges(loud, first, last)
     words[0] = (words[0][0], start, words[0][2])
     words[-1] = (words[-1][0], words[-1][1], end)
-    match = judge(loud, words, gaps, free, speech_snr_db(audio))
+    match = judge(loud, words, gaps, free, speech_snr_db(audio), foreign=foreign)
     moved = {k for k, edge in ((0, start != first), (len(words) - 1, end != last))
              if edge and with_phones and len(phones) == len(words)}
     for k in moved:

@@ -59,16 +59,16 @@ class Aligned:
         """Nothing runs: nothing to stop."""
 
 
-def align_file(audio: str | os.PathLike, text: str, with_phones: bool) -> Aligned:
-    """Align `text` to the audio file `audio` here (with its phones if `with_phones`), as the clip's own
-    animation would: read with load_audio, aligned by align.align_checked."""
+def align_file(audio: str | os.PathLike, text: str, with_phones: bool, language: str = "en") -> Aligned:
+    """Align `text` (in `language`) to the audio file `audio` here (with its phones if `with_phones`), as the
+    clip's own animation would: read with load_audio, aligned by align.align_checked."""
     from facegen import align
     from facegen.audio import load_audio
 
     start, cpu = time.perf_counter(), time.process_time()
     try:
         samples, rate = load_audio(audio)
-        done = align.align_checked(samples, rate, text, with_phones)
+        done = align.align_checked(samples, rate, text, with_phones, language)
         found = Aligned(done.words, done.phones, done.match)
     except FacegenError as exc:
         found = Aligned(error=str(exc), error_param=exc.param)
@@ -109,7 +109,7 @@ class AlignAhead:
         self._receiver.close()
 
 
-def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead | None:
+def start(audio: str | os.PathLike, text: str, with_phones: bool, language: str = "en") -> AlignAhead | None:
     """Fork a process aligning `text` to the audio file `audio` (with its phones if `with_phones`), or None
     where that is not worth it or not safe (see the module docstring)."""
     from multiprocessing import Pipe
@@ -117,7 +117,7 @@ def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead 
     if "torch" in sys.modules or threading.active_count() > 1 or not text.strip() or cores() < 2:
         return None
     receiver, sender = Pipe(duplex=False)
-    process = start_process(_child, (sender, str(audio), text, with_phones), start="fork",
+    process = start_process(_child, (sender, str(audio), text, with_phones, language), start="fork",
                             name="facegen-align")
     sender.close()
     if process is None:  # no fork on this platform
@@ -126,7 +126,7 @@ def start(audio: str | os.PathLike, text: str, with_phones: bool) -> AlignAhead 
     return AlignAhead(process, receiver)
 
 
-def _child(sender, audio: str, text: str, with_phones: bool) -> None:
+def _child(sender, audio: str, text: str, with_phones: bool, language: str) -> None:
     """In the forked process: align and send the Aligned (its words, phones or error)."""
     import signal
 
@@ -135,7 +135,7 @@ def _child(sender, audio: str, text: str, with_phones: bool) -> None:
             signal.signal(getattr(signal, name), signal.SIG_DFL)
     answer = None  # a bug leaves no answer: the parent aligns itself and reports it there
     try:
-        answer = align_file(audio, text, with_phones)
+        answer = align_file(audio, text, with_phones, language)
     except Exception:  # noqa: BLE001, S110 - no traceback here: the parent's own alignment shows it
         pass
     try:

@@ -110,3 +110,19 @@ def check_animation(anim: Animation) -> None:
         isinstance(anim.sample_rate, int | np.integer) and anim.sample_rate > 0
     ):
         raise FacegenError(f"animation sample rate must be a positive integer, got {anim.sample_rate!r}")
+
+
+MAX_FPS = 240.0  # output frames per second at most
+
+
+def check_fps(fps: float | None) -> float | None:
+    """An output frame rate: None (the network's) or a finite number in (0, 240]."""
+    import math
+
+    if fps is None:
+        return None
+    number = isinstance(fps, int | float) and not isinstance(fps, bool)
+    if not number or not math.isfinite(fps) or not 0 < fps <= MAX_FPS:
+        raise FacegenError(f"the frame rate must be a number of frames per second in (0, {MAX_FPS:g}], got "
+                           f"{fps!r}: e.g. 24, 25, 30 or 60", param="fps")
+    return float(fps)

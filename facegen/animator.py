@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from facegen.align_ahead import AlignAhead, Aligned
-from facegen.animation import Animation
+from facegen.animation import Animation, check_fps
 from facegen.audio import check_speech, is_silent, load_audio, mel_features, num_frames
 from facegen.blinks import DEFAULT_RATE, check_blink_rate, check_seed
 from facegen.errors import FacegenError
@@ -79,6 +79,7 @@ class Clip(NetworkInput):
     emotion_spans: list | None = None  # (Emotion, start s, end s) marked in the transcript
     strength: dict | None = None  # the network's motion scaled by region (facegen.strength), None: as it is
     strength_scales: np.ndarray | None = None  # [V], per vertex
+    language: str = "en"  # of the transcript (facegen.languages)
 
 
 class Animator:
@@ -148,7 +149,8 @@ class Animator:
 
     # --------------------------------------------------------------------------------- alignment ahead
 
-    def align_ahead(self, audio, *, text: str | None, alignment=None, no_text: bool = False) -> None:
+    def align_ahead(self, audio, *, text: str | None, alignment=None, no_text: bool = False,
+                    language: str = "en") -> None:
         """Start the forced alignment of `text` to the audio file `audio` in a process of its own, when the
         clip will be force-aligned and the model is not loaded yet (torch not imported: align_ahead.py);
         `prepare` of the same clip takes its answer. Does nothing where that gains nothing."""
@@ -161,12 +163,12 @@ class Animator:
             return
         from facegen import align_ahead
 
-        started = align_ahead.start(audio, text, with_phones=needs == "phones")
+        started = align_ahead.start(audio, text, with_phones=needs == "phones", language=language)
         if started is not None:
-            self._ahead = ((str(audio), text), started)
+            self._ahead = ((str(audio), text, language), started)
 
-    def _take_ahead(self, audio, text: str | None) -> AlignAhead | None:
-        if self._ahead is None or self._ahead[0] != (str(audio), text):
+    def _take_ahead(self, audio, text: str | None, language: str) -> AlignAhead | None:
+        if self._ahead is None or self._ahead[0] != (str(audio), text, language):
             return None
         return self._ahead[1]
 
@@ -185,7 +187,7 @@ class Animator:
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
                 emotion: str | Emotion | None = None, head_motion: float = 1.0,
-                strength=None) -> Clip:
+                strength=None, language: str | None = None) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
@@ -197,14 +199,19 @@ class Animator:
         from facegen.strength import parse_strength
 
         strength = parse_strength(strength)
+        from facegen.languages import check_language, check_script
+
+        language = check_language(language).code
+        if text:
+            check_script(text, check_language(language))
         from facegen.expression import emotion_spans, is_markup, span_times
 
         spans = emotion_spans(text)  # bad markup: before any work
-        ahead = self._take_ahead(audio, text) or aligned
+        ahead = self._take_ahead(audio, text, language) or aligned
         try:
             clip = self._prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                  template=template, reporter=reporter, ahead=ahead, meanwhile=meanwhile,
-                                 on_mismatch=on_mismatch)
+                                 on_mismatch=on_mismatch, language=language)
             clip.fps = check_fps(fps)
             clip.blink_rate, clip.seed, clip.emotion = blink_rate, seed, emotion
             clip.head_motion, clip.strength = head_motion, strength
@@ -223,7 +230,7 @@ class Animator:
                 self.close()
 
     def _prepare(self, audio, *, text, alignment, no_text, speaker, template, reporter: Reporter, ahead,
-                 meanwhile, on_mismatch) -> Clip:
+                 meanwhile, on_mismatch, language) -> Clip:
         bundle = self.bundle
         spk = bundle.speaker_index(speaker)
         mesh = self.mesh(template)
@@ -256,22 +263,22 @@ class Animator:
                 with PROFILE.stage("while_aligning"):
                     meanwhile()
             if uses_text:
-                from facegen.words import normalize_transcript
+                from facegen.words import spoken_words
 
                 backend = self.text_backend()
                 with PROFILE.stage("text_features"):
-                    names = [word for word, _ in normalize_transcript(text)]
+                    names = [word for word, _ in spoken_words(text, language)]
                     early = names, backend.word_vectors(names)
         if bundle.config.n_phones:
             with PROFILE.stage("alignment"):
                 timing = clip_words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,
                                                no_text=no_text, reporter=reporter, ahead=ahead,
-                                               on_mismatch=on_mismatch)
+                                               on_mismatch=on_mismatch, language=language)
         if uses_text:
             if not bundle.config.n_phones:
                 with PROFILE.stage("alignment"):
                     timing = clip_words(samples, sr, text=text, alignment=alignment, reporter=reporter,
-                                        ahead=ahead, on_mismatch=on_mismatch)
+                                        ahead=ahead, on_mismatch=on_mismatch, language=language)
             from facegen.text import frame_features, text_features
 
             words = timing.driving  # recognised words the recogniser is unsure of leave the face neutral
@@ -286,7 +293,7 @@ class Animator:
         reporter.progress(f"inference for {T} frames")
         return Clip(mel, text_feats, spk, timing.phones, audio_name=Path(audio).name, samples=samples,
                     sample_rate=sr, words=timing.words, word_timing=timing.source, mesh=mesh,
-                    match=timing.match, confidences=timing.confidences)
+                    match=timing.match, confidences=timing.confidences, language=language)
 
     # ---------------------------------------------------------------------------------------- the network
 
@@ -382,6 +389,7 @@ class Animator:
                            **({"confidence": clip.confidences[i]} if clip.confidences else {})}
                           for i, w in enumerate(clip.words)],
                 "word_timing": clip.word_timing,
+                **({"language": clip.language} if clip.language != "en" else {}),
                 **({"stage_directions": list(clip.directions)} if clip.directions else {}),
                 **({"transcript_match": clip.match.as_dict()} if clip.match is not None else {}),
                 "blinks": {"rate_per_minute": clip.blink_rate, "seed": clip.seed,
@@ -405,17 +413,20 @@ class Animator:
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
                 emotion: str | Emotion | None = None, head_motion: float = 1.0,
-                strength=None) -> Animation:
+                strength=None, language: str | None = None) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
-        self.align_ahead(audio, text=text, alignment=alignment, no_text=no_text)
+        from facegen.languages import check_language
+
+        language = check_language(language).code
+        self.align_ahead(audio, text=text, alignment=alignment, no_text=no_text, language=language)
         try:
             self.device  # noqa: B018 - an unusable explicit device fails before any work
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                 template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
                                 on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed, emotion=emotion,
-                                head_motion=head_motion, strength=strength)
+                                head_motion=head_motion, strength=strength, language=language)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -433,7 +444,7 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
             blink_rate: float = DEFAULT_RATE, seed: int = 0,
             emotion: str | Emotion | None = None, head_motion: float = 1.0,
-            strength=None) -> Animation:
+            strength=None, language: str | None = None) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -459,27 +470,13 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     1: as people move theirs, up to 3), as `Animation.head` (the vertices stay face-local).
     `strength`: "lips=1.2,jaw=0.8,upper=1.5" or a dict: the network's motion scaled by region
     (facegen.strength; 0-3, 1: as it is; the blinks, gaze, emotion and head keep their own controls).
+    `language`: the transcript's, a code of `facegen languages` (default "en"): its words aligned with their
+    pronunciation in that language (facegen.languages).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
         stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch, blink_rate=blink_rate,
-        seed=seed, emotion=emotion, head_motion=head_motion, strength=strength)
-
-
-MAX_FPS = 240.0  # output frames per second at most
-
-
-def check_fps(fps: float | None) -> float | None:
-    """An output frame rate: None (the network's) or a finite number in (0, 240]."""
-    import math
-
-    if fps is None:
-        return None
-    number = isinstance(fps, int | float) and not isinstance(fps, bool)
-    if not number or not math.isfinite(fps) or not 0 < fps <= MAX_FPS:
-        raise FacegenError(f"the frame rate must be a number of frames per second in (0, {MAX_FPS:g}], got "
-                           f"{fps!r}: e.g. 24, 25, 30 or 60", param="fps")
-    return float(fps)
+        seed=seed, emotion=emotion, head_motion=head_motion, strength=strength, language=language)
 
 
 def forced_alignment_of(model: str | os.PathLike | None) -> str | None:

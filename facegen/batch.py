@@ -28,6 +28,7 @@ from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension, write_animation
 from facegen.expression import Emotion, parse_emotion
 from facegen.input_files import MANIFEST_BYTES, TRANSCRIPT_BYTES, read_input_text
+from facegen.languages import check_language
 from facegen.runtime import SILENT, Reporter
 from facegen.strength import parse_strength
 
@@ -62,6 +63,7 @@ class Job:
     emotion: Emotion | None = None  # the row's 'emotion', else the run's (facegen.expression)
     head_motion: float = 1.0  # facegen.head
     strength: dict | None = None  # the row's 'strength', else the run's (facegen.strength)
+    language: str | None = None  # the row's 'language', else the run's (facegen.languages)
     options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
 
     @property
@@ -106,7 +108,8 @@ class JobResult:
         return "passed" if self.ok else "failed"
 
 
-MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output", "emotion", "strength")
+MANIFEST_COLUMNS = ("audio", "text", "text_file", "alignment", "speaker", "output", "emotion", "strength",
+                    "language")
 PATH_COLUMNS = ("audio", "text_file", "alignment", "output")
 MAX_SPEAKER_CHARS = 100  # a speaker's name or index
 ROW_DEPTH = 3  # brackets a JSON manifest nests: {"jobs": [{row}]}
@@ -301,6 +304,7 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
     try:
         emotion = parse_emotion(row.get("emotion") or None)
         strength = parse_strength(row.get("strength") or None)
+        language = check_language(row["language"]).code if row.get("language") else None
     except FacegenError as exc:
         raise FacegenError(f"{where}: {exc}") from None
     given = [k for k in ("text", "text_file", "alignment") if row.get(k)]
@@ -328,7 +332,7 @@ def _job(row: dict, line: int, path: Path, base: Path, out_base: Path, default_e
     return Job(audio=base / row["audio"], output=outputs[0] if outputs else out, text=text,
                alignment=base / row["alignment"] if row.get("alignment") else None,
                speaker=speaker, line=line, outputs=outputs, problem=problem, text_file=text_file,
-               manifest=path, emotion=emotion, strength=strength)
+               manifest=path, emotion=emotion, strength=strength, language=language)
 
 
 def animate_many(jobs: Iterable[Job], *, animator: Animator | None = None, batch_size: int = BATCH_SIZE,
@@ -372,7 +376,8 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                                                reporter=SILENT.noting(note), aligned=job.aligned,
                                                on_mismatch=job.on_mismatch, blink_rate=job.blink_rate,
                                                seed=job.seed, emotion=job.emotion,
-                                               head_motion=job.head_motion, strength=job.strength)
+                                               head_motion=job.head_motion, strength=job.strength,
+                                               language=job.language)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error

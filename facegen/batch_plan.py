@@ -141,7 +141,8 @@ def item_key(job: Job, out_dir: str | os.PathLike, options: dict) -> str:
                "text": hashlib.sha256(job.text.encode()).hexdigest() if job.text is not None else None,
                "speaker": job.speaker, "outputs": [os.path.relpath(t, out_dir) for t in job.targets],
                "options": options, **({"emotion": job.emotion.as_dict()} if job.emotion is not None else {}),
-               **({"strength": job.strength} if job.strength is not None else {})}
+               **({"strength": job.strength} if job.strength is not None else {}),
+               **({"language": job.language} if job.language not in (None, "en") else {})}
     return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
 

@@ -62,7 +62,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  text_model: str | None = None, device: str = "auto", batch_size: int = 16,
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
                  on_mismatch: str = "error", blink_rate: float = DEFAULT_RATE, seed: int = 0,
-                 emotion: str | None = None, head_motion: float = 1.0, strength=None,
+                 emotion: str | None = None, head_motion: float = 1.0, strength=None, language: str = "en",
                  on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
@@ -75,7 +75,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     the reports (each item's "match" holds its score either way: facegen.transcript_match); `blink_rate`
     and `seed`: every item's blinks (facegen.blinks); `emotion`: every item's (facegen.expression), where
     its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head); `strength`:
-    every item's region scales (facegen.strength), where its row has no 'strength' of its own.
+    every item's region scales (facegen.strength), where its row has no 'strength' of its own; `language`:
+    every item's transcript language (facegen.languages), where its row has no 'language' of its own.
     `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
     ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
@@ -87,7 +88,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         raise FacegenError(f"unknown engine {engine!r}: use {' or '.join(ENGINES)}", param="engine")
     if ray_address is not None and engine != "ray":
         raise FacegenError("a Ray address applies to the ray engine only", param=("ray_address", "engine"))
-    from facegen.animator import check_fps
+    from facegen.animation import check_fps
     from facegen.transcript_match import ON_MISMATCH
 
     check_fps(fps)
@@ -101,6 +102,9 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     from facegen.strength import parse_strength
 
     strength = parse_strength(strength)
+    from facegen.languages import check_language
+
+    language = check_language(language).code
     if on_mismatch not in ON_MISMATCH:
         raise FacegenError(f"unknown mismatch choice {on_mismatch!r}: use one of {', '.join(ON_MISMATCH)}",
                            param="on_mismatch")
@@ -117,6 +121,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         job.emotion = job.emotion if job.emotion is not None else emotion
         job.head_motion = head_motion
         job.strength = job.strength if job.strength is not None else strength
+        job.language = job.language or language
         job.options = {"mode": usd_mode} if usd_mode else {}
         job.audio = Path(os.path.abspath(job.audio))
         job.alignment = Path(os.path.abspath(job.alignment)) if job.alignment is not None else None

@@ -164,7 +164,7 @@ def _align_next(to_align: list[tuple[int, Job, bool]], sent: int) -> bool:
     if not to_align:
         return False
     _, job, phones = to_align.pop()
-    job.aligned = align_file(job.audio, job.text, phones)
+    job.aligned = align_file(job.audio, job.text, phones, job.language)
     return True
 
 

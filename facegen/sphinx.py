@@ -101,9 +101,11 @@ def warm() -> None:
             get_decoder(kind)
 
 
-def dictionary_word(decoder, token: str, letters: list[str] | None = None) -> str:
+def dictionary_word(decoder, token: str, letters: list[str] | str | None = None) -> str:
     """The decoder's dictionary entry for `token`, said as a word or (`letters`: the dictionary's letter
-    words, `facegen.words.spelled`) letter by letter.
+    words, `facegen.words.spelled`) letter by letter; or (`letters` a language code other than English) said
+    in that language: its entry of its own ("pain__fr"), the pronunciation espeak-ng gives it there in the
+    IPA mapped to these phones by articulatory features (facegen.phonetics.ipa_to_cmu), English's left out.
 
     A word missing from the dictionary gets espeak's pronunciation; a known word gets it as an
     alternative when it differs, so a quirk of either (CMUdict's "hmm" = HH M) does not derail it. With
@@ -113,6 +115,8 @@ def dictionary_word(decoder, token: str, letters: list[str] | None = None) -> st
     """
     key = unicodedata.normalize("NFKD", token).encode("ascii", "ignore").decode()
     key = re.sub(r"[^a-z0-9']", "", key.lower()).strip("'") or "oov_" + "_".join(f"{ord(c):x}" for c in token)
+    if isinstance(letters, str):
+        return _foreign_word(decoder, token, key, letters)
     spelling = [decoder.lookup_word(letter) for letter in letters or []]
     name = f"{key}_spelled" if spelling and all(spelling) else key
     done = _PRONOUNCED.setdefault(id(decoder), set())
@@ -126,6 +130,18 @@ def dictionary_word(decoder, token: str, letters: list[str] | None = None) -> st
             have.append(phones)
             decoder.add_word(name if len(have) == 1 else f"{name}({len(have)})", phones, False)
     done.add(name)
+    return name
+
+
+def _foreign_word(decoder, token: str, key: str, voice: str) -> str:
+    from facegen.espeak import phonemize
+    from facegen.phonetics import ipa_to_cmu
+
+    name = f"{key}__{re.sub(r'[^a-z0-9]', '_', voice.lower())}"
+    done = _PRONOUNCED.setdefault(id(decoder), set())
+    if name not in done:
+        decoder.add_word(name, " ".join(ipa_to_cmu(phonemize(token, voice, ipa=True)) or ["AH"]), False)
+        done.add(name)
     return name
 
 

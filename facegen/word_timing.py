@@ -60,10 +60,12 @@ def _check_transcript(text: str) -> None:
 
 def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
                alignment: str | os.PathLike | None = None, reporter: Reporter = SILENT,
-               ahead: AlignAhead | Aligned | None = None, on_mismatch: str = "error") -> Timing:
+               ahead: AlignAhead | Aligned | None = None, on_mismatch: str = "error",
+               language: str = "en") -> Timing:
     """Word timings for the clip and where they came from (alignment file, forced alignment, recognition);
     `ahead`: the forced alignment of `text` already started in a process of its own (align_ahead.py);
-    `on_mismatch`: see `forced`."""
+    `on_mismatch`: see `forced`; `language`: the transcript's (recognition hears English only: in another
+    language, no transcript means no words)."""
     from facegen import recognition
     from facegen.alignment_files import read_alignment
 
@@ -73,23 +75,31 @@ def clip_words(samples: np.ndarray, sr: int, *, text: str | None = None,
         _check_transcript(text)
         reporter.progress("aligning the transcript to the speech (pocketsphinx)")
         try:
-            words, _, match = forced(samples, sr, text, ahead, False, on_mismatch, reporter)
+            words, _, match = forced(samples, sr, text, ahead, False, on_mismatch, reporter, language)
         except FacegenError as exc:
             unaligned = _unaligned(exc, on_mismatch, reporter)
+            if language != "en":
+                return Timing([], NONE, match=unaligned)
             heard = recognition.hear(samples, sr)
             return Timing(heard.words, RECOGNISED, match=unaligned, confidences=heard.confidences)
         return Timing(words, FORCED, match=match)
+    if language != "en":
+        reporter.note(_NO_WORDS.format(language=language))
+        return Timing([], NONE)
     reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with a "
                   "transcript; give the transcript or an alignment file for better upper-face motion)")
     heard = recognition.hear(samples, sr)
     return Timing(heard.words, RECOGNISED, confidences=heard.confidences)
 
 
+_NO_WORDS = ("no transcript in {language}: the lips follow the audio alone (the recogniser knows English "
+             "only: give the transcript for lips and brows that follow the words)")
 FOREIGN_SHARE = 0.25  # of the words missing from the English dictionary: another language (fr 0.47, es 0.31)
 
 
 def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned | None, with_phones: bool,
-           on_mismatch: str = "error", reporter: Reporter = SILENT) -> tuple[list, list | None, Match]:
+           on_mismatch: str = "error", reporter: Reporter = SILENT,
+           language: str = "en") -> tuple[list, list | None, Match]:
     """Forced alignment of `text`: its words, phones (if `with_phones`) and Match (facegen.transcript_match) —
     the answer of the process started ahead, else aligned here (also when that process gave no answer).
     A transcript that does not match the speech is refused (`on_mismatch` "error") or animated with a
@@ -104,13 +114,13 @@ def forced(samples: np.ndarray, sr: int, text: str, ahead: AlignAhead | Aligned 
     try:
         found = ahead.result() if ahead is not None else None
         if found is None:
-            done = align.align_checked(samples, sr, text, with_phones)
+            done = align.align_checked(samples, sr, text, with_phones, language)
             found = done.words, done.phones, done.match
         words, phones, match = found
         if match.problem is not None and on_mismatch == "error":
             raise mismatch(match.problem)
     except FacegenError as exc:
-        refusal = _foreign(exc, text)
+        refusal = _foreign(exc, text) if language == "en" else exc
         if match is None and is_mismatch(exc):  # no alignment at all
             match = unaligned()
         if match is not None:  # a batch reports the refused line's score
@@ -130,20 +140,20 @@ def _foreign(exc: FacegenError, text: str) -> FacegenError:
     from facegen.transcript_match import is_mismatch
 
     if is_mismatch(exc) and sphinx.unknown_share(text) > FOREIGN_SHARE:
-        return FacegenError(f"{exc}; many of its words are not English: the aligner knows English only, so "
-                            "align speech in another language with a tool for that language and pass its "
-                            "word timings", param=("text", "alignment"))
+        return FacegenError(f"{exc}; many of its words are not English: pass the transcript's language with "
+                            "--language (`facegen languages` lists them)", param=("text", "language"))
     return exc
 
 
 def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float, *, text: str | None,
                           alignment, no_text: bool, reporter: Reporter,
-                          ahead: AlignAhead | Aligned | None = None, on_mismatch: str = "error") -> Timing:
+                          ahead: AlignAhead | Aligned | None = None, on_mismatch: str = "error",
+                          language: str = "en") -> Timing:
     """Words and per-frame phones for a model with a phone stream: pocketsphinx's phone alignment of the
     transcript; the words of an alignment file with its phones, or, where it has none, the phones aligned
     inside its word times (`alignment_phones`); or without a transcript (also with --no-text, which only drops
     the text features) the phone alignment of the recognised words."""
-    from facegen.phonetics import phone_frames
+    from facegen.phonetics import phone_frames, silence
 
     if alignment is not None:
         words, phones, source = alignment_phones(samples, sr, alignment, reporter)
@@ -151,13 +161,19 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     if text is not None and not no_text:
         _check_transcript(text)
         try:
-            words, phones, match = forced(samples, sr, text, ahead, True, on_mismatch, reporter)
+            words, phones, match = forced(samples, sr, text, ahead, True, on_mismatch, reporter, language)
         except FacegenError as exc:
             unaligned = _unaligned(exc, on_mismatch, reporter)
+            if language != "en":
+                return Timing([], NONE, silence(num_frames), unaligned)
             timing = _heard_with_phones(samples, sr, num_frames, fps, no_text, reporter)
             timing.match = unaligned
             return timing
         return Timing(words, FORCED, phone_frames(phones, num_frames, fps), match)
+    if language != "en":
+        if not no_text:
+            reporter.note(_NO_WORDS.format(language=language))
+        return Timing([], NONE, silence(num_frames))
     if not no_text:
         reporter.note("no transcript given: recognising the words with pocketsphinx (lower quality than with "
                       "a transcript; give the transcript or an alignment file for better lips and brows)")

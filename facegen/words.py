@@ -276,6 +276,16 @@ def _said_as_digits(before: str, word: str) -> bool:
             and before.lower().rstrip(".#:") in DIGIT_KEYS)
 
 
+def spoken_words(text: str, language: str = "en") -> list[tuple[str, list[str]]]:
+    """`normalize_transcript` for English; in another language (a code of facegen.languages) each word with
+    itself as its one token, lower case: espeak-ng says its numbers and abbreviations in that language's
+    rules (words made only of punctuation and stage directions left out)."""
+    if language == "en":
+        return normalize_transcript(text)
+    words = [strip_edges(raw) for raw in split_directions(text)[0].split()]
+    return [(w, [w.lower()]) for w in words if any(c.isalnum() for c in w)]
+
+
 def check_word_rate(words: int, duration: float, what: str) -> None:
     """Refuse `words` words for `duration` seconds of audio when no speech is that fast (before any work)."""
     allowed = max(MIN_WORDS_ALLOWED, MAX_WORDS_PER_SECOND * duration)

@@ -75,7 +75,8 @@ def test_normalize_word(word, spoken):
 
 
 def test_an_identifier_after_its_key_is_said_digit_by_digit():
-    got = dict(normalize_transcript("extension 1234, password: 4242 PIN 0815 in 1990 with 8500 people dial 600"))
+    got = dict(normalize_transcript("extension 1234, password: 4242 PIN 0815 in 1990 with 8500 people "
+                                    "dial 600"))
     assert got["1234"] == ["one", "two", "three", "four"] and got["4242"] == ["four", "two", "four", "two"]
     assert got["0815"] == ["zero", "eight", "one", "five"] and got["1990"] == ["nineteen", "ninety"]
     assert got["8500"] == ["eight", "thousand", "five", "hundred"] and got["600"] == ["six", "hundred"]

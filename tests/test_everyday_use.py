@@ -220,8 +220,10 @@ def test_a_transcript_missing_its_end_says_so_and_foreign_words_get_the_language
     french = "Bonjour, je voudrais une chambre pour deux nuits, avec une grande fenêtre sur la mer."
     speech = synthesize(french, voice="fr")
     write_wav(speech.audio, speech.sample_rate, tmp_path / "fr.wav")
-    with pytest.raises(FacegenError, match="not English: the aligner knows English only"):
+    with pytest.raises(FacegenError, match="not English: pass the transcript's language with --language"):
         animator.animate(tmp_path / "fr.wav", text=french)
+    anim = animator.animate(tmp_path / "fr.wav", text=french, language="fr")  # and with it, it animates
+    assert anim.metadata["language"] == "fr" and anim.metadata["transcript_match"]["problem"] is None
 
 
 def test_stage_directions_are_kept_in_the_metadata_not_aligned(animator, tmp_path):

@@ -287,7 +287,7 @@ def test_same_bounds_everywhere(tmp_path):
     are facegen's: the longest audio, the highest output rate."""
     import zipfile
 
-    from facegen.animator import MAX_FPS
+    from facegen.animation import MAX_FPS
     from facegen.audio import MAX_SECONDS
     from facegen.blender import facegen_arkit
     from facegen.blender.package import ADDON_MODULE, write_addon

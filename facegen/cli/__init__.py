@@ -19,6 +19,7 @@ from facegen.cli.animate import animate
 from facegen.cli.batch import batch
 from facegen.cli.data import data
 from facegen.cli.files import render, validate
+from facegen.cli.languages import languages
 from facegen.cli.model import evaluate, info, train
 from facegen.errors import FacegenError
 
@@ -30,7 +31,7 @@ def cli(debug: bool) -> None:
     """Speech (audio + transcript) to expressive 3D face animation in USD, glTF and npy."""
 
 
-for _command in (animate, render, align, info, validate, batch, train, evaluate, data):
+for _command in (animate, render, align, languages, info, validate, batch, train, evaluate, data):
     cli.add_command(_command)
 
 

@@ -20,13 +20,18 @@ from facegen.errors import FacegenError
 @click.option("--phones", is_flag=True,
               help="Also write each word's phones (CMU, pocketsphinx phone alignment): a `phones` list / "
                    "tier.")
-def align(audio, text, text_file, output, phones):
+@click.option("--language", "-l", default="en", show_default=True, metavar="CODE",
+              help="The transcript's language (`facegen languages` lists them): its words are aligned with "
+                   "their pronunciation there.")
+def align(audio, text, text_file, output, phones, language):
     """Find when each word (and with --phones each phone) of the transcript is spoken in AUDIO."""
     from facegen.alignment_files import alignment_format, alignment_json, write_alignment
     from facegen.audio import check_speech, load_audio
+    from facegen.languages import check_language, check_script
     from facegen.runtime import Reporter, say_stderr
     from facegen.word_timing import clip_words
 
+    language = check_language(language).code
     one_of(text=text, text_file=text_file)
     protect_inputs([output], audio=audio, transcript=text_file)
     if output:
@@ -34,14 +39,17 @@ def align(audio, text, text_file, output, phones):
     samples, sr = load_audio(audio)
     check_speech(samples, sr, 25.0, name=f"audio file {audio}")
     transcript = read_text(text, text_file)
+    if transcript:
+        check_script(transcript, check_language(language))
     if phones:
         if transcript is None:
             raise FacegenError("--phones needs the transcript: pass --text or --text-file")
         from facegen.align import align_phones
 
-        words, found = align_phones(samples, sr, transcript)
+        words, found = align_phones(samples, sr, transcript, language)
     else:
-        words = clip_words(samples, sr, text=transcript, reporter=Reporter(note=say_stderr)).words
+        words = clip_words(samples, sr, text=transcript, reporter=Reporter(note=say_stderr),
+                           language=language).words
         found = None
     if output:
         from facegen.atomic import output_folders

@@ -66,6 +66,9 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--emotion", metavar="LABEL[:INTENSITY]",
               help="An emotion over the whole clip, on top of what the words do: neutral, happy, sad, angry, "
                    "surprised, afraid or disgusted, intensity 0-1 (default 1), e.g. happy:0.6.")
+@click.option("--language", "-l", default="en", show_default=True, metavar="CODE",
+              help="The transcript's language (`facegen languages` lists them): its words are aligned with "
+                   "their pronunciation there.")
 @click.option("--strength", metavar="REGION=SCALE,...",
               help="Scale the model's motion by region: lips, jaw (the rest of the lower face), upper "
                    "(brows, lids, forehead), 0-3 each (1 = as it is), e.g. lips=1.2,jaw=0.8,upper=1.5.")
@@ -76,7 +79,7 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed,
-            head_motion, emotion, strength, preview, device, quiet):
+            head_motion, emotion, language, strength, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
@@ -85,12 +88,12 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
                  usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet,
                  blink_rate=blink_rate, seed=seed, emotion=emotion, head_motion=head_motion,
-                 strength=strength)
+                 strength=strength, language=language)
 
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
              usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
-             blink_rate, seed, emotion, head_motion, strength):
+             blink_rate, seed, emotion, head_motion, strength, language):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
@@ -100,6 +103,9 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     from facegen.strength import parse_strength
 
     strength = parse_strength(strength)
+    from facegen.languages import check_language, check_script
+
+    language = check_language(language).code
 
     options = {k: v for k, v in (("mode", usd_mode), ("clips", usd_clips), ("rig", rig),
                                  ("morph_targets", morph_targets), ("tolerance", tolerance)) if v is not None}
@@ -115,13 +121,15 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
 
         check_output(preview)
     transcript = read_text(text, text_file)
+    if transcript:
+        check_script(transcript, check_language(language))
     from facegen.expression import emotion_spans
 
     emotion_spans(transcript)  # bad markup: before any work
     animator = Animator(model, text_model=text_model, device=device)
     if plan.rig == "arkit":  # ARKit weights need the rig's regions: checked before work
         # the model loads for the check: its transcript's alignment starts first, so the two overlap
-        animator.align_ahead(audio, text=transcript, alignment=alignment, no_text=no_text)
+        animator.align_ahead(audio, text=transcript, alignment=alignment, no_text=no_text, language=language)
         plan.check_template(animator.mesh(template))
     # notes are "facegen: ..." lines (not "warning:"), said also with --quiet
     reporter = Reporter.stderr(quiet).noting(say_stderr)
@@ -129,7 +137,8 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
     anim = animator.animate(audio, text=transcript, alignment=alignment, no_text=no_text, speaker=speaker,
                             template=template, fps=fps, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer, on_mismatch=on_mismatch, blink_rate=blink_rate,
-                            seed=seed, emotion=emotion, head_motion=head_motion, strength=strength)
+                            seed=seed, emotion=emotion, head_motion=head_motion, strength=strength,
+                            language=language)
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it

@@ -52,10 +52,13 @@ from facegen.cli.options import DEVICE, FiniteRange
 @click.option("--strength", metavar="REGION=SCALE,...",
               help="Scale the model's motion by region in every line: lips, jaw, upper, 0-3 each (e.g. "
                    "lips=1.2,upper=1.5); a manifest's 'strength' column sets it per line.")
+@click.option("--language", "-l", default="en", show_default=True, metavar="CODE",
+              help="The transcripts' language (`facegen languages` lists them); a manifest's 'language' "
+                   "column sets it per line.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model, text_model, device,
           batch_size, ext, usd_mode, fps, on_mismatch, blink_rate, seed, head_motion, emotion,
-          strength, quiet):
+          strength, language, quiet):
     """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment,
     speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
     are skipped. Writes OUTPUT_DIR/report.json and report.xml (JUnit). Exit 1 when any item failed.
@@ -77,6 +80,7 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
                                batch_size=batch_size, default_ext=ext, fps=fps, usd_mode=usd_mode,
                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed,
                                emotion=emotion, head_motion=head_motion, strength=strength,
+                               language=language,
                                on_plan=planned,
                                on_result=lambda _r: bars and bars[0].update(1))
     finally:

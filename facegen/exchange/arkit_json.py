@@ -58,7 +58,8 @@ def write_fitted(anim: Animation, path: str | os.PathLike,
 ROWS = 4096  # weightMat rows turned into text at a time: a long clip's rows never exist as Python floats
 
 
-CONTROLS = ("blinks", "emotion", "emotion_spans", "strength", "head_motion")  # the run's controls, kept
+# the run's controls, kept in the "facegen" block
+CONTROLS = ("language", "blinks", "emotion", "emotion_spans", "strength", "head_motion")
 
 
 def _document(anim: Animation, fit: Fit, track: str) -> Iterator[str]:

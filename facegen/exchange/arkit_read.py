@@ -7,7 +7,7 @@ The bounds, the same for both; a file past one is refused as soon as it shows, m
 
   MAX_SECONDS  4 hours, the longest audio facegen animates (audio.MAX_SECONDS): a JSON's numFrames or its
                rows at its exportFps (at MAX_FPS when it states no rate before its rows), a CSV's Timecodes
-  MAX_FPS      240, the highest rate facegen writes (animator.MAX_FPS); a CSV holds at most 4 hours of rows
+  MAX_FPS      240, the highest rate facegen writes (animation.MAX_FPS); a CSV holds at most 4 hours of rows
                at this rate
   MAX_BYTES    512 MB: 4 hours of facegen's own files (5 decimals, ~420 bytes a frame) at up to 60 fps (363
                MB), or at 25 fps with weights written at full float precision (~1.3 kB a frame)
