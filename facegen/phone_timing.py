@@ -20,8 +20,9 @@ import numpy as np
 
 from facegen.align_pieces import HOP, PIECE_SECONDS
 from facegen.errors import FacegenError
+from facegen.languages import check_language
 from facegen.phonetics import CMU_VOWELS, INDEX
-from facegen.words import Word, normalize_transcript, spelled
+from facegen.words import Word, normalize_transcript, spelled, spoken_words
 
 Phone = tuple[str, float, float]  # (CMU phone without stress, start s, end s)
 PAUSE = 0.1  # s between two words that ends a run
@@ -39,18 +40,19 @@ class WordPhones:
 
 
 def phones_in_word_times(samples: np.ndarray, sample_rate: int, words: list[Word],
-                         known: list[Phone] | None = None) -> WordPhones:
+                         known: list[Phone] | None = None, language: str = "en") -> WordPhones:
     """The phones of `words` (times from an alignment file) in `samples` (mono, any rate): `known` (the file's
     own, if any) for the words they cover, pocketsphinx's phone alignment of each run of the others inside
-    their times, or for a word that does not align its espeak-ng pronunciation spread over its time."""
+    their times, or for a word that does not align its espeak-ng pronunciation spread over its time; the
+    words' pronunciations in `language` (a code of facegen.languages)."""
     known = list(known or [])
     missing = [i for i, covered in enumerate(_covered(words, known)) if not covered]
     if not missing:
         return WordPhones(known)
-    found = _align_runs(samples, sample_rate, words, _runs(words, missing))
-    spread = [i for i in missing if i not in found and _tokens(words[i])]
+    found = _align_runs(samples, sample_rate, words, _runs(words, missing), language)
+    spread = [i for i in missing if i not in found and _tokens(words[i], language)]
     for i in spread:
-        found[i] = _spread(words[i])
+        found[i] = _spread(words[i], language)
     phones = known + [p for i in missing if i in found for p in found[i]]
     return WordPhones(sorted(phones, key=lambda p: p[1]), len(found) - len(spread), len(spread))
 
@@ -76,14 +78,18 @@ def _runs(words: list[Word], indices: list[int]) -> list[list[int]]:
     return runs
 
 
-def _tokens(word: Word) -> list[tuple[str, list[str] | None]]:
-    """What the aligner hears of a word: its spoken tokens, each with its letters if it may be spelled."""
+def _tokens(word: Word, language: str = "en") -> list[tuple[str, list[str] | str | None]]:
+    """What the aligner hears of a word: its spoken tokens, each with its letters if it may be spelled (in
+    another language: with the espeak-ng voice it is said in, sphinx.dictionary_word)."""
+    if language != "en":
+        voice = check_language(language).voice
+        return [(token, voice) for _, tokens in spoken_words(word.text, language) for token in tokens]
     return [(token, spelled(text, token)) for text, tokens in normalize_transcript(word.text)
             for token in tokens]
 
 
 def _align_runs(samples: np.ndarray, sample_rate: int, words: list[Word],
-                runs: list[list[int]]) -> dict[int, list[Phone]]:
+                runs: list[list[int]], language: str) -> dict[int, list[Phone]]:
     """The phones of the words of `runs` that align (word index → phones in the word's time), each run over
     its span, then the words of a run that does not align one by one."""
     from facegen import sphinx
@@ -98,15 +104,16 @@ def _align_runs(samples: np.ndarray, sample_rate: int, words: list[Word],
         duration = len(audio) / sphinx.RATE
         cmn = sphinx.clip_cmn(pcm)
         for run in runs:
-            run = [i for i in run if _tokens(words[i])]
-            phones = _align_span(pcm, cmn, [words[i] for i in run], duration) if run else []
+            run = [i for i in run if _tokens(words[i], language)]
+            phones = _align_span(pcm, cmn, [words[i] for i in run], duration, language) if run else []
             if phones is None:  # word by word
-                phones = [(_align_span(pcm, cmn, [words[i]], duration) or [[]])[0] for i in run]
+                phones = [(_align_span(pcm, cmn, [words[i]], duration, language) or [[]])[0] for i in run]
             found.update((i, word_phones) for i, word_phones in zip(run, phones, strict=True) if word_phones)
     return found
 
 
-def _align_span(pcm: bytes, cmn: str, words: list[Word], duration: float) -> list[list[Phone]] | None:
+def _align_span(pcm: bytes, cmn: str, words: list[Word], duration: float,
+                language: str = "en") -> list[list[Phone]] | None:
     """Each of `words`' phones, force-aligned over the audio of their span (PAD either side) and fitted to the
     word's own time; None when pocketsphinx finds no alignment."""
     from facegen import align, sphinx
@@ -116,8 +123,8 @@ def _align_span(pcm: bytes, cmn: str, words: list[Word], duration: float) -> lis
     if last <= first:
         return None
     part = pcm[first * HOP * 2:last * HOP * 2]
-    counts = [len(_tokens(w)) for w in words]
-    tokens = [t for w in words for t in _tokens(w)]
+    counts = [len(_tokens(w, language)) for w in words]
+    tokens = [t for w in words for t in _tokens(w, language)]
     try:
         found = align.align_piece(part, tokens, last - first, last - first, cmn, prefix=False)
         if found is None:
@@ -145,11 +152,15 @@ def _fit(phones: list[Phone], word: Word) -> list[Phone]:
     return [(p, round(lo + (s - a) * scale, 3), round(lo + (e - a) * scale, 3)) for p, s, e in phones]
 
 
-def _spread(word: Word) -> list[Phone]:
+def _spread(word: Word, language: str = "en") -> list[Phone]:
     """The word's espeak-ng pronunciation (CMU phones) over its time, vowels twice as long as consonants."""
-    from facegen.espeak import pronounce
+    from facegen.espeak import phonemize, pronounce
+    from facegen.phonetics import ipa_to_cmu
 
-    phones = [p for token, _ in _tokens(word) for p in pronounce(token) if p in INDEX]
+    def said(token: str, voice) -> list[str]:
+        return ipa_to_cmu(phonemize(token, voice, ipa=True)) if isinstance(voice, str) else pronounce(token)
+
+    phones = [p for token, voice in _tokens(word, language) for p in said(token, voice) if p in INDEX]
     if not phones:
         return []
     weights = np.array([2.0 if p in CMU_VOWELS else 1.0 for p in phones])

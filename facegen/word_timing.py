@@ -156,7 +156,7 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     from facegen.phonetics import phone_frames, silence
 
     if alignment is not None:
-        words, phones, source = alignment_phones(samples, sr, alignment, reporter)
+        words, phones, source = alignment_phones(samples, sr, alignment, reporter, language)
         return Timing(words, source, phone_frames(phones, num_frames, fps))
     if text is not None and not no_text:
         _check_transcript(text)
@@ -215,7 +215,7 @@ def _heard_with_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float
 
 
 def alignment_phones(samples: np.ndarray, sr: int, alignment: str | os.PathLike,
-                     reporter: Reporter = SILENT) -> tuple[list, list, str]:
+                     reporter: Reporter = SILENT, language: str = "en") -> tuple[list, list, str]:
     """The words of an alignment file, their phones and where those came from: the file's own (Gentle, an MFA
     TextGrid, `facegen align --phones`), else pocketsphinx's phone alignment inside the file's word times
     (facegen.phone_timing), with espeak-ng's pronunciations spread over the words that do not align (a note
@@ -228,7 +228,7 @@ def alignment_phones(samples: np.ndarray, sr: int, alignment: str | os.PathLike,
     known = read_phones(alignment, duration=duration, reporter=reporter)
     if not known:
         reporter.progress(f"aligning the phones inside the word times of {alignment} (pocketsphinx)")
-    found = phones_in_word_times(samples, sr, words, known)
+    found = phones_in_word_times(samples, sr, words, known, language)
     if found.spread:
         reporter.note(f"{found.spread} of {len(words)} words of {alignment} could not be aligned inside "
                       "their times: their phones are spread over them from their pronunciation (check those "

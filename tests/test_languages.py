@@ -118,3 +118,18 @@ def test_languages_lists_what_was_measured():
     measured = [c for c, r in rows.items() if r["measured"]]
     assert len(measured) >= 20 and {"fr", "de", "ru", "nl"} <= set(measured)
     assert rows["nl"].get("held_out") and rows["fr"]["measured"]["onset_median_ms"] < 40
+
+
+def test_a_words_only_file_gets_its_phones_in_the_language():
+    from facegen.phone_timing import phones_in_word_times
+    from facegen.words import Word
+
+    audio, truth = _recording(FRENCH[1], "fr")
+    from facegen.espeak import synthesize
+
+    spoken = synthesize(FRENCH[1], voice="fr", variant="f3", rate=140, pitch=70).words
+    words = [Word(w.text, w.start + 0.4, w.end + 0.4) for w in spoken]
+    found = phones_in_word_times(audio, 16000, words, None, "fr")
+    assert found.aligned == len(words) and found.spread == 0
+    names = [p[0] for p in found.phones]
+    assert "T" in names and "UW" in names  # "train" ... "du": /y/ rounds as UW
