@@ -124,7 +124,7 @@ def test_a_words_only_file_gets_its_phones_in_the_language():
     from facegen.phone_timing import phones_in_word_times
     from facegen.words import Word
 
-    audio, truth = _recording(FRENCH[1], "fr")
+    audio, _ = _recording(FRENCH[1], "fr")
     from facegen.espeak import synthesize
 
     spoken = synthesize(FRENCH[1], voice="fr", variant="f3", rate=140, pitch=70).words
