@@ -1,0 +1,135 @@
+"""Benchmark: lip sync across languages (issue 25, deliverable 6): a model against facegen's rig, per
+language.
+
+Each sentence of benchmarks/language_sentences.py (and five English ones) is spoken by libespeak-ng in its
+language with one of five voice variants; its ground truth is facegen's rig driven by the synthesiser's own
+phone times, each phone labelled by espeak-ng's IPA for its word mapped to the rig's phones
+(facegen.phonetics.ipa_to_cmu; where the synthesiser spoke another number of phones than the IPA lists, the
+word's phones share its time). The model animates the recording with its transcript and `--language CODE`
+(no blinks, still head); facegen.lipsync compares the two: aperture r (lag 0), median aperture ratio, p/b/m
+closed at their midpoints, crossed lips, and the aligner's word-onset error against the synthesiser's times.
+
+    python benchmarks/cross_language.py [--model BUNDLE] [--only fr de ...] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from language_sentences import SENTENCES
+
+ENGLISH = ["Good morning everyone, I am very happy to see you all today.",
+           "My brother works at a big hospital in Boston.",
+           "Tomorrow morning we will take the train to Chicago.",
+           "The cat is sleeping on the sofa in the living room.",
+           "Could you please close the window?"]
+VOICES = [("m1", 150, 40), ("f3", 140, 70), ("m3", 175, 50), ("f2", 160, 60), ("m4", 130, 45)]
+LEAD = 0.4
+
+
+def truth_phones(speech, voice: str) -> list[tuple[str, float, float]]:
+    """The synthesiser's phones as (rig phone, start, end), labelled from espeak-ng's IPA of each word."""
+    from facegen.espeak import phonemize
+    from facegen.phonetics import CMU_VOWELS, ipa_to_cmu, is_silence
+
+    out = []
+    for k, word in enumerate(speech.words):
+        ipa = phonemize(word.text, voice, ipa=True)
+        own = [p for p in speech.phones if p.word == k and not is_silence(p.text)]
+        if own and len(own) == len(ipa):
+            for segment, p in zip(ipa, own, strict=True):
+                parts = ipa_to_cmu([segment])
+                edges = np.linspace(p.start, p.end, len(parts) + 1)
+                out += [(c, edges[i] + LEAD, edges[i + 1] + LEAD) for i, c in enumerate(parts)]
+            continue
+        cmu = ipa_to_cmu(ipa)
+        if not cmu:
+            continue
+        weights = np.array([2.0 if c in CMU_VOWELS else 1.0 for c in cmu])
+        shares = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
+        edges = word.start + (word.end - word.start) * shares
+        out += [(c, edges[i] + LEAD, edges[i + 1] + LEAD) for i, c in enumerate(cmu)]
+    return out
+
+
+def measure(animator, code: str, text: str, k: int, folder: Path) -> dict:
+    from facegen.audio import write_wav
+    from facegen.espeak import synthesize
+    from facegen.languages import check_language
+    from facegen.lipsync import bilabial_midpoints, lipsync_metrics, speech_mask
+    from facegen.synth.curves import loudness_envelope
+    from facegen.synth.reference import rig_reference
+
+    voice = check_language(code).voice
+    variant, rate, pitch = VOICES[k % len(VOICES)]
+    speech = synthesize(text, voice=voice, variant=variant, rate=rate, pitch=pitch, sample_rate=16000)
+    lead = np.zeros(int(LEAD * 16000), np.float32)
+    audio = np.concatenate([lead, speech.audio, np.zeros(4000, np.float32)])
+    level = np.sqrt(np.mean(speech.audio ** 2)) * 10 ** (-30 / 20)  # room noise at 30 dB SNR
+    audio += (level * np.random.default_rng(k).standard_normal(len(audio))).astype(np.float32)
+    wav = folder / f"{code}_{k}.wav"
+    write_wav(audio, 16000, wav)
+    anim = animator.animate(wav, text=text, language=code, blink_rate=0, head_motion=0)
+    phones = truth_phones(speech, voice)
+    words = [(w.text, w.start + LEAD, w.end + LEAD) for w in speech.words]
+    ref = rig_reference(phones, words, anim.num_frames, anim.fps, alphabet="cmu",
+                        loudness=loudness_envelope(audio, 16000))
+    row = lipsync_metrics(np.asarray(anim.vertices), ref, animator.mesh(), anim.fps,
+                          speech=speech_mask(words, anim.num_frames, anim.fps),
+                          bilabials=bilabial_midpoints(phones, anim.fps, alphabet="cmu"))
+    aligned = anim.metadata["words"]
+    onsets = [1000 * abs(a["start"] - (w.start + LEAD)) for a, w in zip(aligned, speech.words, strict=True)
+              ] if len(aligned) == len(speech.words) else []
+    return row, onsets
+
+
+def main() -> None:
+    import facegen
+    from facegen.languages import HELD_OUT
+    from facegen.lipsync import pool_lipsync
+
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--model", help="a model bundle (default: the built-in one)")
+    parser.add_argument("--only", nargs="*")
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    animator = facegen.Animator(args.model)
+    table = {"en": ENGLISH, **SENTENCES}
+    results = {}
+    print("| language | aperture r | median ratio | p/b/m closed (rig) | crossed lips | onset error ms |")
+    print("|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for code, sentences in table.items():
+            if args.only and code not in args.only:
+                continue
+            start = time.perf_counter()
+            done = [measure(animator, code, text, k, Path(tmp)) for k, text in enumerate(sentences)]
+            pooled = pool_lipsync([row for row, _ in done])
+            onsets = [e for _, found in done for e in found]
+            pooled["onset_median_ms"] = float(np.median(onsets)) if onsets else None
+            pooled["seconds"] = round(time.perf_counter() - start, 1)
+            results[code] = pooled
+            p = pooled
+
+            def f(v, spec):
+                return "-" if v is None else format(v, spec)
+
+            print(f"| {code}{' (held out)' if code in HELD_OUT else ''} | {f(p['aperture_r'], '.2f')} | "
+                  f"{f(p['aperture_median_ratio'], '.2f')} | {f(p['bilabial_closure_rate'], '.0%')} "
+                  f"({f(p['ref_bilabial_closure_rate'], '.0%')}) | {f(p['crossed_lips_rate'], '.1%')} | "
+                  f"{f(p['onset_median_ms'], '.0f')} |", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
