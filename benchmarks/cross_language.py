@@ -9,7 +9,7 @@ word's phones share its time). The model animates the recording with its transcr
 (no blinks, still head); facegen.lipsync compares the two: aperture r (lag 0), median aperture ratio, p/b/m
 closed at their midpoints, crossed lips, and the aligner's word-onset error against the synthesiser's times.
 
-    python benchmarks/cross_language.py [--model BUNDLE] [--only fr de ...] [--json out.json]
+    python benchmarks/cross_language.py [--model BUNDLE] [--only fr de ...] [--json out.json] [--figures]
 """
 
 from __future__ import annotations
@@ -101,6 +101,8 @@ def main() -> None:
     parser.add_argument("--model", help="a model bundle (default: the built-in one)")
     parser.add_argument("--only", nargs="*")
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--figures", action="store_true",
+                        help="add each language's lip figures to facegen/language_figures.json")
     args = parser.parse_args()
     animator = facegen.Animator(args.model)
     table = {"en": ENGLISH, **SENTENCES}
@@ -129,6 +131,19 @@ def main() -> None:
                   f"{f(p['onset_median_ms'], '.0f')} |", flush=True)
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
+    if args.figures:
+        merge_figures(results)
+
+
+def merge_figures(results: dict) -> None:
+    """Each language's lip figures into facegen/language_figures.json (what `facegen languages` prints)."""
+    path = Path(__file__).resolve().parents[1] / "facegen" / "language_figures.json"
+    figures = json.loads(path.read_text()) if path.exists() else {}
+    for code, p in results.items():
+        figures.setdefault(code, {})["lips"] = {
+            "aperture_r": round(p["aperture_r"], 3), "median_ratio": round(p["aperture_median_ratio"], 3),
+            "pbm_closed": round(p["bilabial_closure_rate"], 3), "crossed": round(p["crossed_lips_rate"], 4)}
+    path.write_text(json.dumps(figures, indent=1) + "\n")
 
 
 if __name__ == "__main__":

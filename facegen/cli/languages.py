@@ -28,9 +28,19 @@ def languages(as_json):
     click.echo(f"{'code':<16} {'family':<22} {'script':<20} measured on synthetic speech (espeak-ng voices)")
     for r in rows:
         m = r["measured"]
-        said = ("not measured"
-                if m is None else
-                f"onset error median {m['onset_median_ms']:.0f} ms, {m['within_100ms']:.0%} within 100 ms; "
-                f"matching lines {m['accepted']:.0%} accepted, swapped {m['refused']:.0%} refused"
-                + (" (held out of training)" if m.get("held_out") else ""))
+        said = "not measured" if m is None else "; ".join(_figures(m))
         click.echo(f"{r['code']:<16} {r['family']:<22} {r['script']:<20} {said}")
+
+
+def _figures(m: dict) -> list[str]:
+    out = []
+    if "onset_median_ms" in m:
+        out.append(f"onsets {m['onset_median_ms']:.0f} ms off (median), {m['within_100ms']:.0%} within "
+                   f"100 ms, matching lines {m['accepted']:.0%} accepted, swapped {m['refused']:.0%} refused")
+    if "lips" in m:
+        lips = m["lips"]
+        out.append(f"lips vs the rig: aperture r {lips['aperture_r']:.2f}, ratio {lips['median_ratio']:.2f}, "
+                   f"p/b/m closed {lips['pbm_closed']:.0%}")
+    if m.get("held_out"):
+        out.append("held out")
+    return out
