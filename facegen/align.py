@@ -25,11 +25,15 @@ from facegen.align_pieces import (
     LOOKBEHIND,
     MAX_SEARCH,
     RATE,
+    RESYNC_LOUD,
+    RESYNC_WORDS,
     loud_frames,
     pieces,
     prefix_grammar,
     scored,
+    skipped,
     speech_edges,
+    unheld,
     word_window,
 )
 from facegen.errors import FacegenError
@@ -151,16 +155,19 @@ def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_pho
     with LOCK:
         cmn = clip_cmn(pcm)
         start, p = 0, 0
+        before = before_start = 0  # the piece before's first word and frame (its re-synchronisation)
+        no_skip = -1  # a piece whose skipped words could not be aligned with the piece before: tried without
         while p < len(spans) and len(words) < len(spoken):
             last = p == len(spans) - 1
             cut = spans[p][1]
             stop = n_frames if last else min(n_frames, cut + LOOKAHEAD)
-            # the piece before's last word, aligned again: LOOKBEHIND in align_pieces
-            back = 1 if words else 0
-            origin = max(0, words[-1][1] - LOOKBEHIND) if words else 0  # the first frame of its search
+            resync = p != no_skip and unheld(loud, words[before:], start) >= RESYNC_LOUD
+            # the piece before's last word aligned again (LOOKBEHIND in align_pieces), unless re-synchronising
+            back = 1 if words and not resync else 0
+            origin = start if resync else max(0, words[-1][1] - LOOKBEHIND) if words else 0  # search's start
             part = pcm[origin * HOP * 2:stop * HOP * 2]
             found = align_piece(part, [(t, s) for _, t, s in spoken[len(words) - back:]], stop - origin,
-                                 n_frames - origin, cmn, prefix=not last)
+                                n_frames - origin, cmn, not last, RESYNC_WORDS if resync else 0)
             if found is None or len(found[1]) <= back:
                 if last or spans[p + 1][1] - start > MAX_SEARCH:
                     raise mismatch(UNALIGNED)
@@ -169,22 +176,32 @@ def align_checked(audio: np.ndarray, sample_rate: int, transcript: str, with_pho
                 # a search's time and its state pass's memory grow with its length times its words)
                 spans[p:p + 2] = [(start, spans[p + 1][1])]
                 continue
-            decoder, segments = found
+            decoder, segments, skip = found
             kept = segments[back:] if last else [s for s in segments[back:] if s[1] < cut - origin]
             if kept and words and kept[0][1] + origin <= words[-1][2]:  # never before the word before ends
                 kept[0] = (kept[0][0], words[-1][2] + 1 - origin, max(kept[0][2], words[-1][2] + 1 - origin))
             end = n_frames if last else max(cut, origin + (kept[-1][2] + 1 if kept else 0))
+            piece_phones = []
             if kept and (with_phones or p in chosen):
                 alignment = _piece_states(decoder, part, segments[:back + len(kept)], end - origin, cmn, last)
                 if with_phones:
-                    phones += word_phones(alignment, back, len(kept), origin, duration)
+                    piece_phones = word_phones(alignment, back, len(kept), origin, duration)
                 if p in chosen:
-                    n = min(decoder.n_frames() + origin, end) - start
-                    gaps[start:start + n] = _state_gaps(alignment, decoder.n_frames())[start - origin:][:n]
-                    piece_free = _free_gaps(pcm[start * HOP * 2:end * HOP * 2], n, cmn)
-                    free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
+                    _score(alignment, pcm, decoder.n_frames(), origin, start, end, cmn, gaps, free)
+            if skip:  # words said in the piece before: aligned again with it, up to this piece's first word
+                after = words[before - 1][2] + 1 if before else 0  # the word before that piece ends
+                redone = _piece_again(pcm, spoken[before:len(words) + skip], after,
+                                      kept[0][1] + origin if kept else end, cmn, with_phones,
+                                      (before_start, gaps, free) if p - 1 in chosen else None)
+                if redone is None:
+                    no_skip = p
+                    continue
+                words[before:], again = redone
+                if with_phones:
+                    phones[before:] = again
             words += [(w, a + origin, b + origin) for w, a, b in kept]
-            start, p = end, p + 1
+            phones += piece_phones
+            before, before_start, start, p = len(words) - len(kept), start, end, p + 1
     if len(words) < len(spoken):
         raise mismatch(UNALIGNED)
     # the outer edges from the audio (align_pieces.speech_edges); a word whose edge moves is scored over its
@@ -227,33 +244,67 @@ def _word_alone(pcm: bytes, token: tuple[str, list[str] | None], first: int, end
 
 
 def align_piece(pcm: bytes, tokens: list[tuple[str, list[str] | None]], length: int, rest: int, cmn: str,
-                 prefix: bool) -> tuple[object, list[tuple[str, int, int]]] | None:
+                prefix: bool, skippable: int = 0) -> tuple[object, list[tuple[str, int, int]], int] | None:
     """Align one piece: all of `tokens` (each with its letters, if it may be spelled), or (`prefix`) as many
-    of the first of them as its speech holds.
+    of the first of them as its speech holds, possibly (`skippable`) after skipping up to that many of them.
 
-    Tries the decoders of _CONFIGS in turn (wide beams only when the first fails; a prefix never without
+    Tries the decoders of _CONFIGS in turn (wide beams only when the first fails; a grammar never without
     fillers, it would have nothing else for a pause); returns the decoder that aligned it (its search still
-    holds the alignment) and the words (dictionary word, first frame, last frame in the piece), or None.
-    A prefix that takes every word it was offered is offered them all.
+    holds the alignment), the words (dictionary word, first frame, last frame in the piece) and how many
+    tokens it skipped, or None. A prefix that takes every word it was offered is offered them all.
     """
     offers = [word_window(len(tokens), length, rest), len(tokens)] if prefix else [len(tokens)]
-    for kind in ("align", "align-wide") if prefix else ("align", "align-wide", "align-nofiller"):
+    grammar = prefix or skippable > 0
+    for kind in ("align", "align-wide") if grammar else ("align", "align-wide", "align-nofiller"):
         decoder = get_decoder(kind)
         for offered in offers:
             keys = [dictionary_word(decoder, token, letters) for token, letters in tokens[:offered]]
-            if prefix:
-                decoder.add_fsg("_prefix", prefix_grammar(decoder, "_prefix", keys))
+            if grammar:
+                decoder.add_fsg("_prefix", prefix_grammar(decoder, "_prefix", keys, prefix, skippable))
                 decoder.activate_search("_prefix")
             else:
                 decoder.set_align_text(" ".join(keys))
             words = [s for s in decode(decoder, pcm, cmn) if not is_filler(s[0])]
-            said = [base_word(w) for w, _, _ in words]
-            if said == keys or (prefix and words and said == keys[:len(said)]):
-                if len(said) < offered or offered == len(tokens):
-                    return decoder, words
+            skip = skipped([base_word(w) for w, _, _ in words], keys, skippable, whole=not prefix)
+            if skip is not None:
+                if skip + len(words) < offered or offered == len(tokens):
+                    return decoder, words, skip
             elif not prefix or not words:
                 break
     return None
+
+
+def _piece_again(pcm: bytes, tokens: list, first: int, end: int, cmn: str, with_phones: bool, score):
+    """The words (dictionary word, first frame, last frame) of the piece before a re-synchronised one
+    (align_pieces), `tokens` (index, token, letters) forced over its frames from `first` to `end` (excluded),
+    and their phones (with_phones); None when they cannot be aligned there. `score`: None, or (the piece's
+    first frame, gaps, free) to fill again for a scored piece (`_score`)."""
+    part = pcm[first * HOP * 2:end * HOP * 2]
+    found = align_piece(part, [(t, s) for _, t, s in tokens], end - first, end - first, cmn, prefix=False)
+    if found is None or len(found[1]) != len(tokens):
+        return None
+    decoder, segments, _ = found
+    phones = []
+    if with_phones or score:
+        try:
+            alignment = state_pass(decoder, part, cmn)
+        except (FacegenError, RuntimeError):
+            return None
+        if with_phones:
+            phones = word_phones(alignment, 0, len(tokens), first, len(pcm) / 2 / RATE)
+        if score:
+            _score(alignment, pcm, decoder.n_frames(), first, score[0], end, cmn, score[1], score[2])
+    return [(w, a + first, b + first) for w, a, b in segments], phones
+
+
+def _score(alignment, pcm: bytes, searched: int, origin: int, start: int, end: int, cmn: str,
+           gaps: np.ndarray, free: np.ndarray) -> None:
+    """Fill `gaps` and `free` (facegen.transcript_match) from `start` to `end` with a scored piece's state
+    gaps (`alignment` of a search over `searched` frames from `origin`) and the free phone loop's."""
+    n = min(searched + origin, end) - start
+    gaps[start:start + n] = _state_gaps(alignment, searched)[start - origin:][:n]
+    piece_free = _free_gaps(pcm[start * HOP * 2:end * HOP * 2], n, cmn)
+    free[start:start + n] = gaps[start:start + n] if piece_free is None else piece_free[:n]
 
 
 def _piece_states(decoder, pcm: bytes, kept: list[tuple[str, int, int]], length: int, cmn: str, last: bool):

@@ -12,6 +12,14 @@ the first also aligns again the last word of the piece before it (from LOOKBEHIN
 drops it: its first word's onset is then found after speech, as in one long search, not at the start of a
 search (whose noise estimate starts afresh, putting that onset up to 90 ms earlier).
 
+Pieces re-synchronise. A prefix search may give the speech of a piece's last words to its filler model and
+place those words on the next piece's audio (found on a 2-hour loop of recorded prompts: the words of one
+line put on the next line's, after which every piece started with words already said and fell further
+behind, the repeated prompts letting each piece pass). So when a piece leaves RESYNC_LOUD loud frames before
+its cut outside its words (`unheld`), the next one is searched from its cut with a grammar that may also
+start up to RESYNC_WORDS words later (each such start weighted SKIP_PROB); the words it skips are aligned
+again, forced, with the piece before, over its audio up to the first word the next piece kept.
+
 The outer edges of the words come from the audio too (`speech_edges`): pocketsphinx often gives a clip's
 first or last sound to its silence model — the /s/ of "six", the aspiration of "tick", above all in telephone
 audio, whose missing band above 4 kHz is where the acoustic model expects them — and a lone word in silence
@@ -36,6 +44,9 @@ LOOKAHEAD = 150  # frames of the next piece aligned with a piece, so that its la
 LOOKBEHIND = 10  # a piece's search starts this many frames before the last word of the piece before, with it
 MAX_EDGE = 40  # frames the first word's start and the last word's end may move out to the sound they are in
 MAX_SEARCH = 6000  # frames of the longest search: a piece that fails is joined with the next up to this
+RESYNC_LOUD = 30  # loud frames a piece leaves outside its words before its cut: the next may skip words
+RESYNC_WORDS = 20  # words the next piece may then skip (said in the piece before)
+SKIP_PROB = 1e-3  # a grammar's weight of starting after skipped words
 
 
 def loud_frames(audio: np.ndarray, n_frames: int, rate: int = RATE) -> np.ndarray:
@@ -90,13 +101,37 @@ def word_window(left: int, piece: int, rest: int) -> int:
     return min(left, int(1.5 * left * piece / max(rest, 1)) + 8)
 
 
-def prefix_grammar(decoder, name: str, keys: list[str]):
-    """A pocketsphinx grammar of `keys` in order that may end after any of them. Each word also leads to the
-    final state (no empty transitions: their "(NULL)" segments would stop the state-level pass)."""
+def prefix_grammar(decoder, name: str, keys: list[str], may_end: bool = True, skippable: int = 0):
+    """A pocketsphinx grammar of `keys` in order that may end after any of them (`may_end`, else only after
+    the last) and start at any of the first `skippable` + 1 (a later start weighted SKIP_PROB). Each word
+    also leads to the final state (no empty transitions: their "(NULL)" segments would stop the state-level
+    pass)."""
     n = len(keys)
     transitions = [(i, i + 1, 1.0, key) for i, key in enumerate(keys)]
-    transitions += [(i, n, 1.0, key) for i, key in enumerate(keys[:-1])]
+    if may_end:
+        transitions += [(i, n, 1.0, key) for i, key in enumerate(keys[:-1])]
+    transitions += [(0, i + 1, SKIP_PROB, keys[i]) for i in range(1, min(skippable + 1, n))]
     return decoder.create_fsg(name, 0, n, transitions)
+
+
+def skipped(said: list[str], keys: list[str], skippable: int, whole: bool) -> int | None:
+    """How many of `keys` a search that said `said` skipped at its start (at most `skippable`), when `said`
+    follows `keys` from there (to their end when `whole`); None when it does not."""
+    for skip in range(min(skippable, len(keys) - 1) + 1):
+        if said and said == keys[skip:skip + len(said)] and (not whole or skip + len(said) == len(keys)):
+            return skip
+    return None
+
+
+def unheld(loud: np.ndarray, words: list[tuple[str, int, int]], end: int) -> int:
+    """Loud frames from the first of `words` (dictionary word, first frame, last frame) up to `end` that none
+    of them holds."""
+    if not words:
+        return 0
+    free = loud[words[0][1]:end].copy()
+    for _, first, last in words:
+        free[max(first - words[0][1], 0):last + 1 - words[0][1]] = False
+    return int(free.sum())
 
 
 def speech_edges(loud: np.ndarray, first: int, last: int) -> tuple[int, int]:

@@ -133,3 +133,26 @@ def test_a_words_only_file_gets_its_phones_in_the_language():
     assert found.aligned == len(words) and found.spread == 0
     names = [p[0] for p in found.phones]
     assert "T" in names and "UW" in names  # "train" ... "du": /y/ rounds as UW
+
+
+def test_batch_reads_a_language_column(french_wav, tmp_path):
+    """Each row in its own language (the run's, English, where the column is empty); an unknown code refuses
+    the manifest before any work, naming its line."""
+    import csv
+
+    def run(rows: list[list[str]]) -> subprocess.CompletedProcess:
+        manifest = tmp_path / "lines.csv"
+        with manifest.open("w", newline="") as f:
+            csv.writer(f).writerows([["audio", "text", "output", "language"], *rows])
+        return subprocess.run([sys.executable, "-m", "facegen", "batch", str(manifest), "-o",
+                               str(tmp_path / "out"), "-q", "--jobs", "1"], capture_output=True, text=True,
+                              check=False)
+
+    rows = [[french_wav, FRENCH[0], "fr.json", "fr"], [french_wav, FRENCH[0], "en.json", ""]]
+    bad = run([*rows, [french_wav, FRENCH[0], "xx.json", "xx-nowhere"]])
+    assert bad.returncode == 2 and "line 4" in bad.stderr and "xx-nowhere" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1 and not list((tmp_path / "out").glob("*.json"))
+    done = run(rows)
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "out" / "fr.json").read_text())["facegen"]["language"] == "fr"
+    assert "language" not in json.loads((tmp_path / "out" / "en.json").read_text())["facegen"]  # English
