@@ -145,6 +145,28 @@ def stages(log: Path) -> str:
     return ""
 
 
+def drift(words_json: Path, lines_tsv: Path) -> str:
+    """How far the aligned words lie from the truth: each line's first word's start and last word's end
+    against where the line was put (NAME.lines.tsv), as the median and largest error and the lines with
+    an edge more than 1 s off."""
+    from facegen.words import spoken_words
+
+    words = json.loads(words_json.read_text())["words"]
+    errors, k = [], 0
+    for row in lines_tsv.read_text().splitlines():
+        start, end, text = row.split("\t", 2)
+        count = len(spoken_words(text, "en"))
+        if count:
+            line = words[k:k + count]
+            errors.append(max(abs(line[0]["start"] - float(start)), abs(line[-1]["end"] - float(end))))
+        k += count
+    if k != len(words):
+        return f"{len(words)} words aligned, {k} in the lines: not comparable"
+    errors = np.array(errors)
+    return (f"{len(errors)} lines: edge error median {np.median(errors):.2f} s, max {errors.max():.2f} s, "
+            f"{int((errors > 1).sum())} lines with an edge > 1 s off, last line {errors[-1]:.2f} s")
+
+
 def commands(wav: Path, txt: Path, out: Path) -> dict[str, list[str]]:
     facegen = [sys.executable, "-m", "facegen"]
     return {
@@ -189,6 +211,8 @@ def main() -> None:
         print(f"{name:<12} {code:>4} {wall:>8.1f} {args.seconds / wall:>7.1f} {family:>8.0f} {own:>7.0f}  "
               f"{'ok' if ok else 'MISSED'}  load {os.getloadavg()[0]:.2f}", flush=True)
         print(f"   {said if code else stages(out / f'{name}.log')}", flush=True)
+        if name == "align" and code == 0:
+            print(f"   {drift(out / 'words.json', wav.with_suffix('.lines.tsv'))}", flush=True)
         for output in out.glob("[tn].*"):  # a 2-hour .npy takes 50 GB
             output.unlink()
 
