@@ -10,7 +10,8 @@ The first word's start and the last word's end come from the audio (`facegen.ali
 Long audio is aligned piece by piece, cut at pauses (`facegen.align_pieces`; a piece that fails is retried
 alone with wide beams). Every pass subtracts the whole clip's cepstral mean and starts with a fresh noise
 estimate, so results never depend on earlier calls; each piece re-aligns the word before it, so the pieces
-give the words and phones of one search over the clip.
+give the words and phones of one search over the clip; a piece that leaves loud speech outside its words lets
+the next one skip words already said, which go back to it (re-synchronisation, in align_pieces).
 """
 
 from __future__ import annotations

@@ -263,12 +263,13 @@ class Animator:
                 with PROFILE.stage("while_aligning"):
                     meanwhile()
             if uses_text:
+                from facegen.lexicons import glossed
                 from facegen.words import spoken_words
 
                 backend = self.text_backend()
                 with PROFILE.stage("text_features"):
                     names = [word for word, _ in spoken_words(text, language)]
-                    early = names, backend.word_vectors(names)
+                    early = names, backend.word_vectors(glossed(names, language))
         if bundle.config.n_phones:
             with PROFILE.stage("alignment"):
                 timing = clip_words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,
@@ -288,7 +289,7 @@ class Animator:
             else:
                 backend = self.text_backend()
                 with PROFILE.stage("text_features"):
-                    text_feats = text_features(words, backend, T, cfg)
+                    text_feats = text_features(words, backend, T, cfg, language)
 
         reporter.progress(f"inference for {T} frames")
         return Clip(mel, text_feats, spk, timing.phones, audio_name=Path(audio).name, samples=samples,

@@ -388,12 +388,16 @@ def text_features(
     backend: TextBackend,
     num_frames: int,
     config: FeatureConfig,
+    language: str | None = None,
 ) -> np.ndarray:
     """Per-frame smoothed text features ``[num_frames, backend.dim]`` float32 for timed words, at the fps
-    and with the smoothing window of ``config`` (the bundle's features)."""
+    and with the smoothing window of ``config`` (the bundle's features). Words of ``language`` (a code of
+    facegen.languages; None: English) are read as facegen.lexicons glosses them."""
+    from facegen.lexicons import glossed
+
     if not words:
         return zero_features(num_frames, backend.dim)
-    vectors = backend.word_vectors([w.text for w in words])
+    vectors = backend.word_vectors(glossed([w.text for w in words], language))
     return frame_features(words, vectors, num_frames, config)
 
 
