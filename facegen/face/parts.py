@@ -256,14 +256,14 @@ def face_parts(template: np.ndarray, regions: dict[str, np.ndarray]) -> list[Par
     cav = (t[reg["mouth_cavity"]] - mouth) / cm
     upper_wall = _wall(cav[cav[:, 1] > 0.45])
     lower_wall = _wall(cav[cav[:, 1] < -0.45])
-    upper = _arch(upper_wall, UPPER_TEETH, 0.02, 0.0, 0.95, cm)
-    lower = _arch(lower_wall, LOWER_TEETH, -0.12, -0.06, -0.85, cm)
+    upper = _arch(upper_wall, UPPER_TEETH, -0.06, -0.22, 1.0, cm)  # hangs below the slit
+    lower = _arch(lower_wall, LOWER_TEETH, -0.38, -0.08, -0.85, cm)  # behind the upper set (overbite)
     hinge = t[reg["jaw_hinge"]].mean(0)
     for name, boxes, pivot in (("UpperTeeth", upper, mouth), ("LowerTeeth", lower, hinge)):
         v, f, groups = _group_mesh([("Teeth", b[0] + (mouth - pivot), b[1]) for b in boxes])
         parts.append(Part(name, v, f, groups, pivot.astype(np.float32)))
     tv, tf, targets = _tongue(cm)
-    z_front = float(np.interp(0.0, *lower_wall)) - 0.12 - TOOTH_DEPTH - 0.12
+    z_front = float(np.interp(0.0, *lower_wall)) - 0.38 - TOOTH_DEPTH - 0.1
     centre = mouth + np.array([0.0, -0.38, z_front - TONGUE_CM[2]]) * cm
     parts.append(Part("Tongue", tv + (centre - hinge).astype(np.float32), tf, [("Tongue", 0, len(tf))],
                       hinge.astype(np.float32), targets))
@@ -325,18 +325,36 @@ def part_tracks(parts: list[Part], drivers: PartDrivers, jaw_angle: np.ndarray,
 
 def skin_clearance(frame: np.ndarray, faces: np.ndarray, regions: dict[str, np.ndarray],
                    points: np.ndarray) -> np.ndarray:
-    """How far each of `points` [n, 3] lies behind the skin of the face's `frame` [V, 3] (the face without
-    its eyeball caps and mouth cavity), along the nearest skin vertex's normal: > 0 behind (inside the
-    head), < 0 poking through. The measure of tests/test_parts.py and benchmarks/parts.py."""
+    """How far each of `points` [n, 3] lies behind the skin of the face's `frame` [V, 3] (without its
+    eyeball caps and mouth cavity), looking from the front (along -z): the depth to the nearest skin in
+    front of it; a point with no skin in front but skin behind it pokes through (negative: how far in front
+    of that skin); a point with neither is seen through an opening (the mouth, the eyes' slits): +inf.
+    The measure of tests/test_parts.py and benchmarks/parts.py."""
     from scipy.spatial import cKDTree
 
-    from facegen.face.mesh import vertex_normals
-
     frame = np.asarray(frame, np.float64)
-    hidden = np.concatenate([np.asarray(regions[r], np.int64) for r in ("left_eyeball", "right_eyeball",
-                                                                         "mouth_cavity")])
-    skin = np.setdiff1d(np.arange(len(frame)), hidden)
-    normals = vertex_normals(frame.astype(np.float32), np.asarray(faces)).astype(np.float64)
-    _, nearest = cKDTree(frame[skin]).query(np.asarray(points, np.float64))
-    q = skin[nearest]
-    return np.einsum("ij,ij->i", frame[q] - points, normals[q])
+    points = np.asarray(points, np.float64)
+    hidden = np.zeros(len(frame), bool)
+    for r in ("left_eyeball", "right_eyeball", "mouth_cavity"):
+        hidden[np.asarray(regions[r], np.int64)] = True
+    f = np.asarray(faces, np.int64)
+    f = f[~hidden[f].any(1)]
+    tri = frame[f]  # [F, 3, 3]
+    reach = float(np.linalg.norm(tri[:, :, :2] - tri[:, :, :2].mean(1, keepdims=True), axis=2).max())
+    near = cKDTree(tri[:, :, :2].mean(1)).query_ball_point(points[:, :2], reach)
+    out = np.full(len(points), np.inf)
+    for i, cands in enumerate(near):
+        if not cands:
+            continue
+        a, b, c = (tri[cands, k] for k in range(3))
+        v0, v1, v2 = b[:, :2] - a[:, :2], c[:, :2] - a[:, :2], points[i, :2] - a[:, :2]
+        den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
+        ok = np.abs(den) > 1e-18
+        u = np.where(ok, (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / np.where(ok, den, 1), -1)
+        w = np.where(ok, (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / np.where(ok, den, 1), -1)
+        inside = (u >= 0) & (w >= 0) & (u + w <= 1)
+        if not inside.any():
+            continue
+        z = (a[:, 2] + u * (b[:, 2] - a[:, 2]) + w * (c[:, 2] - a[:, 2]))[inside] - points[i, 2]
+        out[i] = z[z >= 0].min() if (z >= 0).any() else z.max()
+    return out
