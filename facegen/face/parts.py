@@ -33,7 +33,7 @@ UPPER_TEETH = (0.78, 0.62, 0.72, 0.66, 0.66)  # widths (cm) from the midline out
 LOWER_TEETH = (0.55, 0.58, 0.64, 0.66, 0.70)
 TOOTH_DEPTH = 0.28  # cm front to back
 TONGUE_CM = (1.55, 0.33, 1.2)  # semi-axes x, y, z
-TONGUE_RAISE_CM, TONGUE_FORWARD_CM = 0.45, 0.45
+TONGUE_RAISE_CM, TONGUE_FORWARD_CM = 0.8, 0.45
 PART_NAMES = ("LeftEye", "RightEye", "UpperTeeth", "LowerTeeth", "Tongue")
 
 
