@@ -10,7 +10,7 @@ Layout added to a written stage (exchange/usd.py) when the Animation has parts:
                              translate (where its pivot is) and orient (a quaternion); time-sampled per frame
                              where the part moves (the eyes turn with the gaze, the lower teeth and the
                              tongue with the jaw), a constant value where it does not (the upper teeth)
-    /Face/<Part>/Mesh        Mesh in the part's own coordinates (about its pivot), its GeomSubsets per
+    /Face/<Part>/<Part>Mesh  Mesh in the part's own coordinates (about its pivot), its GeomSubsets per
                              material bound (the eyes: Pupil, Iris, EyeWhite); the tongue's points have one
                              time sample per frame (its tip rising and coming forward)
 
@@ -90,7 +90,7 @@ def _author_part(stage, track, looks: dict) -> None:
         move.Set(Gf.Vec3d(*track.translation[0].tolist()))
         x, y, z, w = quats[0].tolist()
         turn.Set(Gf.Quatf(w, x, y, z))
-    mesh = UsdGeom.Mesh.Define(stage, f"/Face/{part.name}/Mesh")
+    mesh = UsdGeom.Mesh.Define(stage, f"/Face/{part.name}/{part.name}Mesh")  # Blender names it so
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(part.faces), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(part.faces.reshape(-1).astype(np.int32)))
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
