@@ -44,7 +44,7 @@ class Animation:
     metadata: dict = field(default_factory=dict)
     head: np.ndarray | None = None  # [T, 3] (yaw, pitch, roll) degrees about head_pivot (facegen.head)
     head_pivot: np.ndarray | None = None  # [3] mesh units
-    parts: PartDrivers | None = None  # the eyes', teeth's and tongue's drivers (face/parts.py), None: no parts
+    parts: PartDrivers | None = None  # what moves the eyes, teeth, tongue (face/parts.py); None: no parts
 
     @classmethod
     def from_mesh(cls, mesh: Mesh, vertices: np.ndarray, fps: float, **fields) -> Animation:

@@ -1,6 +1,7 @@
 """The layers over the network's frames of a clip: what the network cannot predict from the audio and the
 words — blinks timed by the speech (facegen.blinks), gaze (facegen.gaze: saccades, aversion; the eyeballs
-turned, the upper lids following; the parts' eyes too), the tongue (facegen.tongue), the clip's emotion (facegen.expression) and the head's motion
+turned, the upper lids following; the parts' eyes too), the tongue (facegen.tongue), the clip's
+emotion (facegen.expression) and the head's motion
 (facegen.head, beside the frames: a transform). The times and settings go in the metadata (animator)."""
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ def tongue_curves(phones: np.ndarray | None, frames: int, fps: float) -> np.ndar
         return out
     phones = np.asarray(phones)
     at = np.minimum((np.arange(frames) * len(phones)) // frames, len(phones) - 1)
-    half = max(1, int(round(COARTICULATION_S * fps / 2)))
+    half = max(1, round(COARTICULATION_S * fps / 2))
     window = np.hanning(2 * half + 3)[1:-1]
     window /= window.max()
     for k, group in enumerate((RAISED, FORWARD)):

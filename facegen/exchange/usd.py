@@ -52,10 +52,10 @@ from facegen.atomic import Transaction
 from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_clips, usd_skel
-from facegen.exchange.usd_parts import author_parts
 from facegen.exchange.formats import by_module
 from facegen.exchange.morph_targets import targets_as_written, writer_basis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
+from facegen.exchange.usd_parts import author_parts
 from facegen.exchange.usd_values import python_value, usd_dict
 from facegen.exchange.wav import atomic_with_sidecar
 from facegen.face.mesh import Mesh, check_topology

@@ -106,7 +106,8 @@ def lip_blend(faces: np.ndarray, lips: np.ndarray, num_vertices: int, rings: int
     w = np.zeros(num_vertices)
     w[lips] = 1.0
     edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    degree = np.bincount(edges[:, 0], minlength=num_vertices) + np.bincount(edges[:, 1], minlength=num_vertices)
+    degree = (np.bincount(edges[:, 0], minlength=num_vertices)
+              + np.bincount(edges[:, 1], minlength=num_vertices))
     for _ in range(rings):
         total = np.bincount(edges[:, 0], w[edges[:, 1]], num_vertices) + np.bincount(
             edges[:, 1], w[edges[:, 0]], num_vertices)

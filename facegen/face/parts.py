@@ -240,8 +240,8 @@ def _tongue(cm: float) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     forward[:, 2] = TONGUE_FORWARD_CM * front
     forward[:, 1] = 0.15 * front
     forward[:, 0] = -0.25 * local[:, 0] * front
-    return (local * cm).astype(np.float32), f.astype(np.int32), {"tipUp": (up * cm).astype(np.float32),
-                                                                 "tipForward": (forward * cm).astype(np.float32)}
+    targets = {"tipUp": (up * cm).astype(np.float32), "tipForward": (forward * cm).astype(np.float32)}
+    return (local * cm).astype(np.float32), f.astype(np.int32), targets
 
 
 def face_parts(template: np.ndarray, regions: dict[str, np.ndarray]) -> list[Part]:
