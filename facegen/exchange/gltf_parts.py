@@ -15,6 +15,7 @@ import numpy as np
 from facegen.animation import Animation
 from facegen.face.materials import MATERIALS
 from facegen.face.mesh import vertex_normals
+from facegen.face.parts import quaternions
 
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 
@@ -24,7 +25,6 @@ def add_parts(anim: Animation, accessor, nodes: list, meshes: list, materials: l
     """Append the parts' nodes, meshes, materials and animation channels to a document being built
     (exchange/gltf.py's `build`: `accessor(data, kind, target, with_bounds)` adds an accessor)."""
     import pygltflib as g
-    from scipy.spatial.transform import Rotation
 
     tracks = anim.part_meshes()
     if not tracks:
@@ -64,7 +64,7 @@ def add_parts(anim: Animation, accessor, nodes: list, meshes: list, materials: l
         extras = {"targetNames": list(part.targets)} if part.targets else None
         meshes.append(g.Mesh(name=part.name, primitives=primitives, extras=extras,
                              weights=[0.0] * len(part.targets) if part.targets else None))
-        quats = Rotation.from_matrix(track.rotation).as_quat().astype(np.float32)
+        quats = quaternions(track.rotation).astype(np.float32)
         nodes.append(g.Node(name=part.name, mesh=len(meshes) - 1, translation=track.translation[0].tolist(),
                             rotation=quats[0].astype(float).tolist()))
         node = len(nodes) - 1

@@ -23,6 +23,7 @@ import numpy as np
 
 from facegen.animation import Animation
 from facegen.face.materials import MATERIALS, face_triangle_materials
+from facegen.face.parts import quaternions
 
 LOOKS = "/Face/Looks"
 
@@ -73,13 +74,12 @@ def _bind_subsets(stage, mesh, groups: list[tuple[str, np.ndarray]], looks: dict
 
 def _author_part(stage, track, looks: dict) -> None:
     from pxr import Gf, UsdGeom, UsdShade, Vt
-    from scipy.spatial.transform import Rotation
 
     part = track.part
     xform = UsdGeom.Xform.Define(stage, f"/Face/{part.name}")
     move = xform.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
     turn = xform.AddOrientOp(UsdGeom.XformOp.PrecisionFloat)
-    quats = Rotation.from_matrix(track.rotation).as_quat()  # x, y, z, w
+    quats = quaternions(track.rotation)  # x, y, z, w
     moving = bool(np.ptp(track.translation, 0).max() > 0 or np.ptp(quats, 0).max() > 0)
     if moving:
         for t in range(len(quats)):

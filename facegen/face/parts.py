@@ -104,6 +104,21 @@ def x_rotations(angle: np.ndarray) -> np.ndarray:
     return out
 
 
+def quaternions(rotation: np.ndarray) -> np.ndarray:
+    """[n, 4] unit quaternions (x, y, z, w; glTF's order, w >= 0) of rotation matrices [n, 3, 3] (without
+    scipy.spatial: its import costs half a second)."""
+    r = np.asarray(rotation, np.float64)
+    w = np.sqrt(np.maximum(0.0, 1 + r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2])) / 2
+    x = np.sqrt(np.maximum(0.0, 1 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2])) / 2
+    y = np.sqrt(np.maximum(0.0, 1 - r[:, 0, 0] + r[:, 1, 1] - r[:, 2, 2])) / 2
+    z = np.sqrt(np.maximum(0.0, 1 - r[:, 0, 0] - r[:, 1, 1] + r[:, 2, 2])) / 2
+    x = np.copysign(x, r[:, 2, 1] - r[:, 1, 2])
+    y = np.copysign(y, r[:, 0, 2] - r[:, 2, 0])
+    z = np.copysign(z, r[:, 1, 0] - r[:, 0, 1])
+    q = np.stack([x, y, z, w], 1)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
 def has_parts(regions: dict) -> bool:
     """Whether a face names what the parts are fitted to (facegen's procedural faces do)."""
     return all(r in regions for r in ("left_eyeball", "right_eyeball", "mouth_cavity", "mouth_upper_margin",
