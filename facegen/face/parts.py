@@ -344,7 +344,7 @@ def skin_clearance(frame: np.ndarray, faces: np.ndarray, regions: dict[str, np.n
     eyeball caps and mouth cavity), looking from the front (along -z): the depth to the nearest skin in
     front of it; a point with no skin in front but skin behind it pokes through (negative: how far in front
     of that skin); a point with neither is seen through an opening (the mouth, the eyes' slits): +inf.
-    The measure of tests/test_parts.py and benchmarks/parts.py."""
+    The measure of tests/test_parts.py and benchmarks/bench_face_parts.py."""
     from scipy.spatial import cKDTree
 
     frame = np.asarray(frame, np.float64)
