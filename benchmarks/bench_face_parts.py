@@ -32,7 +32,7 @@ def main(argv: list[str]) -> None:
             d = d / cm * 10
             if d < worst.get(track.part.name, (np.inf, 0))[0]:
                 worst[track.part.name] = (d, t)
-    print(f"{anim.num_frames} frames ({anim.duration:.2f} s); clearance behind the skin, seen from the front:")
+    print(f"{anim.num_frames} frames ({anim.duration:.2f} s); clearance behind the skin, from the front:")
     for name, (mm, t) in worst.items():
         print(f"  {name:11s} {mm:7.2f} mm at its closest (frame {t})")
     with tempfile.TemporaryDirectory() as folder:
