@@ -229,3 +229,16 @@ def test_blender_imports_the_parts(anim, tmp_path):
         assert seen["moved"], (path, seen)
         assert "Lips" in seen["materials"] or path.endswith(".glb"), seen  # USD: the face's subsets
         assert {"Iris", "Pupil", "Teeth"} <= set(seen["materials"]), seen
+
+
+def test_render_of_a_file_draws_the_parts(anim, tmp_path):
+    from facegen.exchange import read_animation, write_animation
+    from facegen.render import _with_parts
+
+    write_animation(anim, tmp_path / "face.usdc")
+    back = _with_parts(read_animation(tmp_path / "face.usdc"))
+    assert back.parts is not None
+    drawn = {tr.part.name: tr for tr in back.part_meshes()}
+    made = tracks_by_name(anim)
+    for name in ("LeftEye", "LowerTeeth"):  # the same gaze and jaw as the preview of the Animation
+        assert np.allclose(drawn[name].rotation, made[name].rotation, atol=1e-4)

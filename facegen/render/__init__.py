@@ -227,6 +227,37 @@ def _read_input(
     return read_animation(path, template=template, fps=fps)
 
 
+def _with_parts(anim: Animation) -> Animation:
+    """A file facegen wrote from speech, drawn with its parts as the preview draws them: the gaze from its
+    metadata's saccades, the jaw read from its chin; the tongue at rest (files keep no phones). A face
+    without the regions the parts fit to gets the built-in face's when it has its topology."""
+    import json
+    from dataclasses import replace
+
+    from facegen.face.parts import PartDrivers, has_parts
+    from facegen.gaze import Saccade, gaze_curve
+
+    saccades = anim.metadata.get("saccades")
+    if anim.parts is not None or saccades is None:
+        return anim
+    try:
+        found = [Saccade(*map(float, s)) for s in (json.loads(saccades) if isinstance(saccades, str)
+                                                     else saccades)]
+    except (TypeError, ValueError):
+        return anim
+    regions = anim.regions
+    if not has_parts(regions):
+        from facegen.face.template import load_template
+
+        face = load_template()
+        if face.num_vertices != anim.num_vertices or not np.array_equal(face.faces, anim.faces):
+            return anim
+        regions = face.regions
+    gaze = gaze_curve(found, anim.num_frames, anim.fps)
+    return replace(anim, regions=dict(regions),
+                   parts=PartDrivers(gaze, np.zeros((anim.num_frames, 2), np.float32)))
+
+
 def _default_template(path: Path) -> Mesh:
     """The built-in model's template for a .npy of its vertex count (what `facegen animate` writes with the
     default model); any other count is a FacegenError asking for the mesh."""
@@ -267,7 +298,7 @@ def render(
     views = check_views(views)
     check_size(size)
     mesh = template if template is None or isinstance(template, Mesh) else read_mesh(template)
-    anim = input if isinstance(input, Animation) else _read_input(input, mesh, fps)
+    anim = input if isinstance(input, Animation) else _with_parts(_read_input(input, mesh, fps))
     label_a = "A" if isinstance(input, Animation) else f"A: {Path(input).name}"
     other, label_b = None, "B"
     if compare is not None:
