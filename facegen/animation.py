@@ -9,6 +9,7 @@ import numpy as np
 
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
+from facegen.face.parts import PartDrivers, PartTrack
 
 DEFAULT_FPS = 25.0  # the frame rate of a file that states none (BIWI's)
 
@@ -25,6 +26,9 @@ class Animation:
     head:     [T, 3] float32 rotation of the whole head per frame, (yaw, pitch, roll) degrees about
               `head_pivot` (facegen.head), or None: a still head. The vertices stay face-local; writers put
               it on a transform where the format has one.
+    parts:    what moves the parts beside the face (facegen.face.parts: eyeballs with irises, teeth, tongue):
+              the gaze and the tongue's weights per frame, or None: no parts (files read back, a face without
+              the regions they are fitted to). `part_meshes()` gives the parts and their motion.
 
     The template's fields stay flat (rather than one `mesh: Mesh` field) because they are what users,
     writers and readers of Animation read: `anim.faces`, `anim.template`, `anim.regions`.
@@ -40,6 +44,7 @@ class Animation:
     metadata: dict = field(default_factory=dict)
     head: np.ndarray | None = None  # [T, 3] (yaw, pitch, roll) degrees about head_pivot (facegen.head)
     head_pivot: np.ndarray | None = None  # [3] mesh units
+    parts: PartDrivers | None = None  # what moves the eyes, teeth, tongue (face/parts.py); None: no parts
 
     @classmethod
     def from_mesh(cls, mesh: Mesh, vertices: np.ndarray, fps: float, **fields) -> Animation:
@@ -74,6 +79,24 @@ class Animation:
     def streamed(self) -> bool:
         """True when `vertices` is a FrameStream: frames are computed on demand, never all held at once."""
         return hasattr(self.vertices, "blocks")
+
+    def part_meshes(self) -> list[PartTrack]:
+        """The parts beside the face and their motion over the frames (facegen.face.parts), [] without
+        `parts` or the regions they are fitted to; the jaw's motion is read from the chin's vertices."""
+        from facegen.face import parts as p
+
+        if self.parts is None or not p.has_parts(self.regions):
+            return []
+        cached = getattr(self, "_part_tracks", None)
+        if cached is not None and cached[0] is self.vertices:
+            return cached[1]
+        chin = p.chin_points(self.template, self.regions)
+        frames = self.vertices.points(chin) if self.streamed else np.asarray(self.vertices)[:, chin]
+        hinge = np.asarray(self.template, np.float64)[np.asarray(self.regions["jaw_hinge"])].mean(0)
+        angle, hinge_at = p.jaw_motion(np.asarray(self.template, np.float64)[chin], frames, hinge)
+        tracks = p.part_tracks(p.face_parts(self.template, self.regions), self.parts, angle, hinge_at)
+        self._part_tracks = (self.vertices, tracks)
+        return tracks
 
     def frame_blocks(self, block_frames: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
         """(first frame, [n, V, 3] float32 frames) for consecutive blocks, for arrays and streams alike: a

@@ -75,6 +75,7 @@ class Clip(NetworkInput):
     head_motion: float = 1.0  # how much the head moves (facegen.head; 0: still)
     head: np.ndarray | None = None  # [T, 3] degrees, once run
     head_pivot: np.ndarray | None = None
+    parts: object = None  # facegen.face.parts.PartDrivers, once run
     emotion: Emotion | None = None  # over the whole clip (facegen.expression)
     emotion_spans: list | None = None  # (Emotion, start s, end s) marked in the transcript
     strength: dict | None = None  # the network's motion scaled by region (facegen.strength), None: as it is
@@ -381,6 +382,7 @@ class Animator:
             regions=dict(clip.mesh.regions),
             head=clip.head,
             head_pivot=clip.head_pivot,
+            parts=clip.parts,
             metadata={
                 "source_audio": clip.audio_name,
                 "model": bundle.path.name if bundle.path else "in-memory",

@@ -150,13 +150,9 @@ class EyeTurns:
 
     def rotations(self, start: int, stop: int) -> np.ndarray:
         """[n, 3, 3]: yaw about +y, then pitch about x (+ up)."""
-        yaw, pitch = self.gaze[start:stop, 0], self.gaze[start:stop, 1]
-        cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(-pitch), np.sin(-pitch)
-        ry = np.zeros((len(yaw), 3, 3))
-        ry[:, 0, 0], ry[:, 0, 2], ry[:, 1, 1], ry[:, 2, 0], ry[:, 2, 2] = cy, sy, 1, -sy, cy
-        rx = np.zeros((len(yaw), 3, 3))
-        rx[:, 0, 0], rx[:, 1, 1], rx[:, 1, 2], rx[:, 2, 1], rx[:, 2, 2] = 1, cp, -sp, sp, cp
-        return ry @ rx
+        from facegen.face.parts import gaze_rotations  # the parts' eyeballs turn by the same rotation
+
+        return gaze_rotations(self.gaze[start:stop, 0], self.gaze[start:stop, 1])
 
     def turn(self, start: int, points: np.ndarray) -> np.ndarray:
         """The eyeball points `points` [n, len(indices), 3] of frames start.. turned (a new array)."""

@@ -332,6 +332,23 @@ class FrameStream:
                 out[s:s + 4096] += moved.reshape(len(points), -1) @ sub.T.astype(np.float64)
         return out
 
+    def points(self, indices: np.ndarray) -> np.ndarray:
+        """The vertices `indices` in every frame, [T, n, 3] float64, from their rows of the output layer only
+        (the jaw's motion read from the chin: facegen.face.parts); not for the eyeballs (their turn)."""
+        rows = (np.asarray(indices, np.int64)[:, None] * 3 + np.arange(3)).reshape(-1)
+        weight, base = self._weight, self._base
+        if self._torch:
+            weight, base = weight[rows].cpu().numpy(), base[rows].cpu().numpy()
+        else:
+            weight, base = weight[rows], base[rows]
+        states = self._states.cpu().numpy() if self._torch else self._states
+        flat = states.astype(np.float64) @ weight.T.astype(np.float64) + base
+        if self.scale is not None:
+            flat = self.scale[1][rows] + self.scale[0][rows] * (flat - self.scale[1][rows])
+        if self.layers is not None:
+            flat += self.layers[0].astype(np.float64) @ self.layers[1][:, rows].astype(np.float64)
+        return flat.reshape(len(states), -1, 3)
+
     def _block_of(self, i: int) -> tuple[int, np.ndarray]:
         first = (i // self.block_frames) * self.block_frames
         if self._cached is None or self._cached[0] != first:

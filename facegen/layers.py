@@ -1,6 +1,7 @@
 """The layers over the network's frames of a clip: what the network cannot predict from the audio and the
 words — blinks timed by the speech (facegen.blinks), gaze (facegen.gaze: saccades, aversion; the eyeballs
-turned, the upper lids following), the clip's emotion (facegen.expression) and the head's motion
+turned, the upper lids following; the parts' eyes too), the tongue (facegen.tongue), the clip's
+emotion (facegen.expression) and the head's motion
 (facegen.head, beside the frames: a transform). The times and settings go in the metadata (animator)."""
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ def add_layers(clip, stream, fps: float):
     from facegen.expression import emotion_offsets, span_curve
     from facegen.gaze import EyeTurns, gaze_curve, lid_curves, saccades
 
-    clip.blinks, clip.saccades, clip.head = [], [], None
+    clip.blinks, clip.saccades, clip.head, clip.parts = [], [], None, None
     try:
         shapes = arkit_shapes(clip.mesh)
     except FacegenError:
@@ -52,6 +53,10 @@ def add_layers(clip, stream, fps: float):
             offsets.append(mood)
     if curves:
         stream = stream.with_layers(np.stack(curves, 1), np.stack([o.reshape(-1) for o in offsets]))
+    from facegen.face.parts import PartDrivers
+    from facegen.tongue import tongue_curves
+
+    clip.parts = PartDrivers(gaze, tongue_curves(clip.phones, frames, fps))  # eyes, teeth, tongue
     if clip.saccades:
         stream = stream.with_turns(EyeTurns(clip.mesh.vertices, clip.mesh.regions, gaze))
     if clip.head_motion and "jaw_hinge" in clip.mesh.regions:

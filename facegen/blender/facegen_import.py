@@ -324,7 +324,8 @@ def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]
     if "FINISHED" not in result:
         raise RuntimeError(f"Blender could not import {path} ({result})")
     objects = [o for o in bpy.data.objects if o not in before]
-    meshes = [o for o in objects if o.type == "MESH"]
+    # the face first: the mesh with the most vertices (the eyes, teeth and tongue beside it are smaller)
+    meshes = sorted((o for o in objects if o.type == "MESH"), key=lambda o: -len(o.data.vertices))
     for obj in meshes:
         keys = obj.data.shape_keys
         if keys is not None and keys.animation_data is not None and keys.animation_data.action is not None:

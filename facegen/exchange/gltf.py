@@ -27,6 +27,8 @@ Layout of a written file:
                    emitter on the scene. The MP3 is delay-compensated (exchange/mp3.py). The exact clip is
                    also written as a WAV beside the file (`out.wav`): Blender and most DCCs ignore the
                    extension and take the sidecar.
+    parts          with parts (an Animation from the network): nodes LeftEye, RightEye, UpperTeeth,
+                   LowerTeeth, Tongue under "Face", their meshes, materials and channels (gltf_parts.py)
     asset.extras   facegen: version, fps, frames, duration, rig, morphTargets (targets in the file),
                    tolerance, reconstructionError (largest vertex error / face size),
                    reconstructionErrorUnits, faceSize, metersPerUnit, lipErrorMm and faceErrorMm (arkit:
@@ -52,6 +54,7 @@ from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
 from facegen.exchange.formats import by_module
+from facegen.exchange.gltf_parts import add_parts
 from facegen.exchange.morph_targets import normal_deltas, targets_as_written, writer_basis
 from facegen.exchange.pca import MorphBasis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
@@ -191,8 +194,10 @@ def build(
                                            interpolation="LINEAR"))
         channels.append(g.AnimationChannel(sampler=1,
                                            target=g.AnimationChannelTarget(node=1, path="rotation")))
-    animation = g.Animation(name="speech", samplers=samplers, channels=channels)
     scene = g.Scene(name="Scene", nodes=[len(nodes) - 1])
+    meshes, materials = [mesh], [skin]
+    add_parts(anim, accessor, nodes, meshes, materials, samplers, channels, time_input)  # gltf_parts.py
+    animation = g.Animation(name="speech", samplers=samplers, channels=channels)
     extras = {
         "facegen": {
             "version": __version__,
@@ -213,7 +218,7 @@ def build(
     }
     gltf = g.GLTF2(
         asset=g.Asset(version="2.0", generator=f"facegen {__version__}", extras=extras),
-        scene=0, scenes=[scene], nodes=nodes, meshes=[mesh], materials=[skin], animations=[animation],
+        scene=0, scenes=[scene], nodes=nodes, meshes=meshes, materials=materials, animations=[animation],
         accessors=accessors,
     )
     if sound is not None:

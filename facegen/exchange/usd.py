@@ -14,6 +14,8 @@ Layout of a written file (`out.usda`, `.usdc` or `.usd`; `.usd` is binary crate)
                    (constant skin colour), MaterialBindingAPI -> /Face/Looks/Skin
     /Face/Looks/Skin  Material; its Shader "Surface" a UsdPreviewSurface (diffuseColor the skin colour,
                    metallic 0, roughness 0.6) connected to outputs:surface
+    /Face/<Part>   with parts (an Animation from the network): eyes, teeth, tongue, and the face's
+                   material subsets (usd_parts.py)
     /Face/Audio    SpatialAudio: filePath @./out.wav@ (relative to the layer), auralMode nonSpatial,
                    playbackMode onceFromStart (play once from startTime to the audio's end); startTime
                    is its schema fallback 0 (authoring a timecode forces usdc crate 0.9 and a warning)
@@ -53,6 +55,7 @@ from facegen.exchange import usd_clips, usd_skel
 from facegen.exchange.formats import by_module
 from facegen.exchange.morph_targets import targets_as_written, writer_basis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
+from facegen.exchange.usd_parts import author_parts
 from facegen.exchange.usd_values import python_value, usd_dict
 from facegen.exchange.wav import atomic_with_sidecar
 from facegen.face.mesh import Mesh, check_topology
@@ -202,6 +205,7 @@ def _author_stage(
     if mode == "blendshapes":
         root.CreateExtentAttr(box)
     _author_look(stage, mesh, rest)
+    author_parts(stage, anim, MESH_PATH)  # materials per region, eyes, teeth, tongue (usd_parts.py)
 
     if audio_asset is not None:
         sound = UsdMedia.SpatialAudio.Define(stage, AUDIO_PATH)

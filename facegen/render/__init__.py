@@ -40,6 +40,7 @@ from facegen.render.raster import (
     heat_colors,
     render_image,
 )
+from facegen.render.scene import Scene
 from facegen.render.video import check_output, clip_audio, encode, frames_in_order
 from facegen.runtime import BARS, Reporter, cores
 
@@ -91,7 +92,8 @@ def render_animation(
     check_animation(anim)
     _check_finite(anim, "the animation")
     notes: list[str] = []
-    renderer = Renderer(anim.faces, anim.template, size, views, supersample)
+    scene = Scene(anim, parts=compare is None)  # the face and its parts (eyes, teeth, tongue)
+    renderer = Renderer(scene.faces, scene.template, size, views, supersample)
     frames, audio_source = anim.num_frames, anim
     vmax = None
     if compare is not None:
@@ -115,11 +117,11 @@ def render_animation(
     height = renderer.size
     threads = cores() if threads is None else max(1, int(threads))
 
-    base_colors = face_colors(anim.regions, anim.num_vertices)
+    base_colors = scene.colors
 
     def render_one(t: int) -> np.ndarray:
         frame = np.empty((height, width, 3), np.uint8)
-        renderer.render_into(_posed(anim, t), frame[:, : renderer.width], base_colors)
+        renderer.render_into(_posed(anim, t, scene), frame[:, : renderer.width], base_colors)
         if compare is not None:
             colors = heat_colors(_vertex_errors(anim, compare, t), vmax)
             renderer.render_into(_posed(compare, t), frame[:, renderer.width :], colors)
@@ -148,9 +150,12 @@ def render_animation(
     )
 
 
-def _posed(anim: Animation, t: int) -> np.ndarray:
-    """Frame `t` as it is seen: the face-local vertices turned with the head (Animation.head) if it moves."""
+def _posed(anim: Animation, t: int, scene: Scene | None = None) -> np.ndarray:
+    """Frame `t` as it is seen: the face-local vertices (and the `scene`'s parts) turned with the head
+    (Animation.head) if it moves."""
     vertices = np.asarray(anim.vertices[t])
+    if scene is not None:
+        vertices = scene.points(vertices, t)
     if anim.head is None:
         return vertices
     from facegen.head import rotations
@@ -222,6 +227,37 @@ def _read_input(
     return read_animation(path, template=template, fps=fps)
 
 
+def _with_parts(anim: Animation) -> Animation:
+    """A file facegen wrote from speech, drawn with its parts as the preview draws them: the gaze from its
+    metadata's saccades, the jaw read from its chin; the tongue at rest (files keep no phones). A face
+    without the regions the parts fit to gets the built-in face's when it has its topology."""
+    import json
+    from dataclasses import replace
+
+    from facegen.face.parts import PartDrivers, has_parts
+    from facegen.gaze import Saccade, gaze_curve
+
+    saccades = anim.metadata.get("saccades")
+    if anim.parts is not None or saccades is None:
+        return anim
+    try:
+        found = [Saccade(*map(float, s)) for s in (json.loads(saccades) if isinstance(saccades, str)
+                                                     else saccades)]
+    except (TypeError, ValueError):
+        return anim
+    regions = anim.regions
+    if not has_parts(regions):
+        from facegen.face.template import load_template
+
+        face = load_template()
+        if face.num_vertices != anim.num_vertices or not np.array_equal(face.faces, anim.faces):
+            return anim
+        regions = face.regions
+    gaze = gaze_curve(found, anim.num_frames, anim.fps)
+    return replace(anim, regions=dict(regions),
+                   parts=PartDrivers(gaze, np.zeros((anim.num_frames, 2), np.float32)))
+
+
 def _default_template(path: Path) -> Mesh:
     """The built-in model's template for a .npy of its vertex count (what `facegen animate` writes with the
     default model); any other count is a FacegenError asking for the mesh."""
@@ -262,7 +298,7 @@ def render(
     views = check_views(views)
     check_size(size)
     mesh = template if template is None or isinstance(template, Mesh) else read_mesh(template)
-    anim = input if isinstance(input, Animation) else _read_input(input, mesh, fps)
+    anim = input if isinstance(input, Animation) else _with_parts(_read_input(input, mesh, fps))
     label_a = "A" if isinstance(input, Animation) else f"A: {Path(input).name}"
     other, label_b = None, "B"
     if compare is not None:
@@ -305,8 +341,9 @@ def render_still(
     else:
         if not 0 <= frame < input.num_frames:
             raise FacegenError(f"frame {frame} is outside the clip's 0..{input.num_frames - 1}")
-        vertices, faces, template = _posed(input, frame), input.faces, input.template
-    colors = face_colors(input.regions, len(vertices))
+        scene = Scene(input)
+        vertices, faces, template = _posed(input, frame, scene), scene.faces, scene.template
+    colors = scene.colors if not isinstance(input, Mesh) else face_colors(input.regions, len(vertices))
     image = render_image(vertices, faces, template, size=size, views=check_views(views), colors=colors)
     with atomic_path(path) as tmp:
         Image.fromarray(image).save(tmp, "PNG")

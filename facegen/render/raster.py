@@ -37,15 +37,15 @@ import numba
 import numpy as np
 
 from facegen.errors import FacegenError
+from facegen.face.materials import MATERIALS, REGION_MATERIALS
 from facegen.face.mesh import vertex_normals
 
 VIEWS: dict[str, float] = {"front": 0.0, "three_quarter": 40.0, "profile": 90.0}  # yaw, degrees
 DEFAULT_VIEWS = ("front", "three_quarter")
 FIELD_OF_VIEW = 20.0  # degrees, vertical and horizontal (square views)
 FILL = 0.84  # the template fills this fraction of a view's width or height
-SKIN = (0.86, 0.69, 0.60)  # sRGB
-REGION_COLORS = {"lips": (0.72, 0.42, 0.42), "left_eyeball": (0.93, 0.93, 0.90),
-                 "right_eyeball": (0.93, 0.93, 0.90), "mouth_cavity": (0.35, 0.16, 0.16)}  # sRGB
+SKIN = MATERIALS["Skin"].srgb  # sRGB, from the one materials table (face/materials.py)
+REGION_COLORS = {region: MATERIALS[name].srgb for region, name in REGION_MATERIALS.items()}  # sRGB
 BACKGROUND = (0.08, 0.09, 0.11)  # sRGB
 HEAT_STOPS = ((0.78, 0.80, 0.84), (0.99, 0.87, 0.33), (0.96, 0.50, 0.12), (0.78, 0.07, 0.07))  # sRGB, 0 → 1
 # lights in view space (x right, y up, z towards the viewer): direction, intensity
