@@ -103,8 +103,12 @@ def main() -> None:
               f"swapped refused {refused}/{len(sentences)}; word gap right "
               f"{np.round(gaps_right, 1).tolist()} wrong {np.round(gaps_wrong, 1).tolist()}"
               f"{'  (held out)' if code in HELD_OUT else ''}", flush=True)
-    if not args.no_write:
-        (REPO / "facegen" / "language_figures.json").write_text(json.dumps(figures, indent=1) + "\n")
+    if not args.no_write:  # each language's other figures (cross_language.py's lips) are kept
+        path = REPO / "facegen" / "language_figures.json"
+        kept = json.loads(path.read_text()) if path.exists() else {}
+        for code, found in figures.items():
+            kept[code] = {**kept.get(code, {}), **found}
+        path.write_text(json.dumps(kept, indent=1) + "\n")
         (REPO / "benchmarks" / "results" / "languages.json").write_text(json.dumps(cases, indent=1) + "\n")
 
 
