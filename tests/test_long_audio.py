@@ -278,7 +278,7 @@ def _writing(_lines: list[str], folder: Path, _pid: int) -> bool:
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "command", "ready"), [
     ("aligning (the forked aligner)", ["animate", "-o", "a.json", "--text-file"], _forked(2.0)),
-    ("aligning (in the process)", ["align", "-o", "words.json", "--text-file"], _after(6.0)),
+    ("aligning (in the process)", ["align", "-o", "words.json", "--text-file"], _after(3.0)),  # 150 s: ~5 s
     ("recognising", ["animate", "-o", "r.json"], _said("recognising the words", 2.0)),
     ("the ARKit fit", ["animate", "-o", "f.json", "--text-file"], _said("inference for", 2.5)),
     ("writing the .npy", ["animate", "-o", "w.npy", "--text-file"], _writing),
