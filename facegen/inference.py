@@ -318,35 +318,30 @@ class FrameStream:
             out += curves.astype(np.float64) @ (offsets.astype(np.float64) @ basis.T.astype(np.float64))
         if self.turns is not None:  # the eyeballs' turn, computed on their points only
             rows = (self.turns.indices[:, None] * 3 + np.arange(3)).reshape(-1)
-            w, b, sub = weight[rows].astype(np.float64), base[rows].astype(np.float64), basis[:, rows]
-            extra = None if self.layers is None else self.layers[1][:, rows].astype(np.float64)
+            sub = basis[:, rows].T.astype(np.float64)
             for s in range(0, len(states), 4096):
-                flat = states[s:s + 4096].astype(np.float64) @ w.T + b
-                if self.scale is not None:
-                    scaled_from = self.scale[1][rows].astype(np.float64)
-                    flat = scaled_from + self.scale[0][rows] * (flat - scaled_from)
-                if extra is not None:
-                    flat += self.layers[0][s:s + 4096].astype(np.float64) @ extra
-                points = flat.reshape(-1, len(self.turns.indices), 3)
+                points = self.points(self.turns.indices, s, s + 4096)
                 moved = self.turns.turn(s, points) - points
-                out[s:s + 4096] += moved.reshape(len(points), -1) @ sub.T.astype(np.float64)
+                out[s:s + 4096] += moved.reshape(len(points), -1) @ sub
         return out
 
-    def points(self, indices: np.ndarray) -> np.ndarray:
-        """The vertices `indices` in every frame, [T, n, 3] float64, from their rows of the output layer only
-        (the jaw's motion read from the chin: facegen.face.parts); not for the eyeballs (their turn)."""
+    def points(self, indices: np.ndarray, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """The vertices `indices` in frames `start` to `stop` (None: the last), [n, k, 3] float64, from their
+        rows of the output layer only, before the eyeballs' turn (the jaw read from the chin:
+        facegen.face.parts; the turned points: `project`)."""
         rows = (np.asarray(indices, np.int64)[:, None] * 3 + np.arange(3)).reshape(-1)
         weight, base = self._weight, self._base
         if self._torch:
             weight, base = weight[rows].cpu().numpy(), base[rows].cpu().numpy()
         else:
             weight, base = weight[rows], base[rows]
-        states = self._states.cpu().numpy() if self._torch else self._states
-        flat = states.astype(np.float64) @ weight.T.astype(np.float64) + base
+        states = (self._states.cpu().numpy() if self._torch else self._states)[start:stop]
+        flat = states.astype(np.float64) @ weight.T.astype(np.float64) + base.astype(np.float64)
         if self.scale is not None:
-            flat = self.scale[1][rows] + self.scale[0][rows] * (flat - self.scale[1][rows])
+            scaled_from = self.scale[1][rows].astype(np.float64)
+            flat = scaled_from + self.scale[0][rows] * (flat - scaled_from)
         if self.layers is not None:
-            flat += self.layers[0].astype(np.float64) @ self.layers[1][:, rows].astype(np.float64)
+            flat += self.layers[0][start:stop].astype(np.float64) @ self.layers[1][:, rows].astype(np.float64)
         return flat.reshape(len(states), -1, 3)
 
     def _block_of(self, i: int) -> tuple[int, np.ndarray]:

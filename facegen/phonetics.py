@@ -142,8 +142,7 @@ CMU_IPA = {"AA": "ɑ", "AE": "æ", "AH": "ʌ", "AO": "ɔ", "AW": "aʊ", "AY": "a
            "TH": "θ", "V": "v", "W": "w", "Y": "j", "Z": "z", "ZH": "ʒ"}
 IPA_ALIASES = {"ə": "AH", "ɐ": "AH", "ɜ": "ER", "ɚ": "ER", "a": "AA", "e": "EY", "o": "OW", "g": "G",
                "ɾ": "D", "r": "D", "ɫ": "L", "ʧ": "CH", "ʤ": "JH", "ts": "T S", "dz": "D Z", "ɹ̩": "ER",
-               "ʍ": "W",
-               "β": "V", "ɸ": "F", "ʋ": "V", "ø": "OW"}  # lips that near but do not close: not B, P
+               "ʍ": "W", "β": "V", "ɸ": "F", "ʋ": "V", "ø": "OW"}  # lips that near but do not close: not B, P
 VISIBLE_WEIGHTS = {"syl": 3.0, "cons": 2.0, "lab": 3.0, "round": 3.0, "lo": 2.0, "hi": 2.0, "back": 1.5,
                    "cor": 1.5, "ant": 1.0, "son": 1.0, "cont": 1.0, "lat": 1.0, "strid": 1.0, "distr": 0.5,
                    "nas": 0.5, "delrel": 0.5}
