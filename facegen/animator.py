@@ -44,7 +44,7 @@ class NetworkInput:
     the speaker index, and phones [T, P] one-hot (models with a phone stream; None: silence)."""
 
     mel: np.ndarray
-    text_features: np.ndarray | None
+    text_features: np.ndarray | None  # or a facegen.text.WordFrames (the same numbers, made when read)
     speaker: int
     phones: np.ndarray | None = None
 
@@ -281,16 +281,16 @@ class Animator:
                 with PROFILE.stage("alignment"):
                     timing = clip_words(samples, sr, text=text, alignment=alignment, reporter=reporter,
                                         ahead=ahead, on_mismatch=on_mismatch, language=language)
-            from facegen.text import frame_features, text_features
+            from facegen.text import text_features, word_frames
 
             words = timing.driving  # recognised words the recogniser is unsure of leave the face neutral
             reporter.progress(f"text features ({bundle.text_backend}) for {len(words)} words")
             if early is not None and early[0] == [w.text for w in words]:
-                text_feats = frame_features(words, early[1], T, cfg)
+                text_feats = word_frames(words, early[1], T, cfg)  # made as the network reads them
             else:
                 backend = self.text_backend()
                 with PROFILE.stage("text_features"):
-                    text_feats = text_features(words, backend, T, cfg, language)
+                    text_feats = text_features(words, backend, T, cfg, language, lazy=True)
 
         reporter.progress(f"inference for {T} frames")
         return Clip(mel, text_feats, spk, timing.phones, audio_name=Path(audio).name, samples=samples,
@@ -329,7 +329,8 @@ class Animator:
         model, dev = self.bundle.model, self.device
         with torch.inference_mode():
             mel = torch.from_numpy(item.mel)[None].to(dev)
-            text = None if item.text_features is None else torch.from_numpy(item.text_features)[None].to(dev)
+            text = (None if item.text_features is None
+                    else torch.from_numpy(np.asarray(item.text_features, np.float32))[None].to(dev))
             phones = None if item.phones is None else torch.from_numpy(item.phones)[None].to(dev)
             enc = model.encode(mel, text, model.speaker_one_hot(item.speaker).to(dev), phones)
             return {k: v[0].float().cpu().numpy() for k, v in enc.items()}

@@ -30,10 +30,12 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from facegen.runtime import threads
+from facegen.runtime import release_memory, threads
 
 BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
+LAYER_FRAMES = 64  # frames a block's layers are added to at a time (64 x 70,110 float32 = 18 MB)
+TURN_FRAMES = 512  # frames of eyeball points turned at a time in `project` (512 x 1,042 x 3 float64 = 13 MB)
 LONG_FRAMES = 4096  # a longer clip runs the network this many frames at a time (`_long_states`)
 
 
@@ -147,18 +149,37 @@ def _long_states(model, mel: np.ndarray, text: np.ndarray | None, spk, phones: n
             part = {k: v[:, f:f + fusion_frames] for k, v in enc.items()}
             x[s + f:s + f + fusion_frames] = model.act(model.fc_in(model.fuse(part, spk)))[0]
     for layer in range(cfg.lstm_layers):
-        out = torch.empty(T, 2 * cfg.lstm_dim, device=device)
-        for direction, suffix in enumerate(("", "_reverse")):
-            lstm = torch.nn.LSTM(x.shape[1], cfg.lstm_dim, batch_first=True).to(device)
-            for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
-                getattr(lstm, f"{name}_l0").copy_(getattr(model.lstm, f"{name}_l{layer}{suffix}"))
-            columns, state = slice(direction * cfg.lstm_dim, (direction + 1) * cfg.lstm_dim), None
-            for s in range(0, T, step) if direction == 0 else reversed(range(0, T, step)):
-                piece = x[s:s + step] if direction == 0 else x[s:s + step].flip(0)
-                y, state = lstm(piece[None], state)
-                out[s:s + step, columns] = y[0] if direction == 0 else y[0].flip(0)
-        x = out
+        x = _bidirectional(model, layer, x, step)
+    release_memory()  # the pieces' blocks, freed: while the frames are written the heap holds no holes
     return x
+
+
+def _bidirectional(model, layer: int, x, step: int):
+    """One layer of the decoder BiLSTM over x [T, D], `step` frames at a time: [T, 2 * lstm_dim]. The forward
+    direction runs first into a buffer of its own; the backward direction then walks from the end, and a
+    piece of x it has read is needed no more, so where x is as wide as the output (every layer after the
+    first) the output is written into x's own memory: x, and half its width besides, is all this holds."""
+    import torch
+
+    H, T = model.cfg.lstm_dim, len(x)
+
+    def lstm_of(suffix: str):
+        lstm = torch.nn.LSTM(x.shape[1], H, batch_first=True).to(x.device)
+        for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
+            getattr(lstm, f"{name}_l0").copy_(getattr(model.lstm, f"{name}_l{layer}{suffix}"))
+        return lstm
+
+    forward, lstm, state = torch.empty(T, H, device=x.device), lstm_of(""), None
+    for s in range(0, T, step):
+        y, state = lstm(x[s:s + step][None], state)
+        forward[s:s + step] = y[0]
+    out = x if x.shape[1] == 2 * H else torch.empty(T, 2 * H, device=x.device)
+    lstm, state = lstm_of("_reverse"), None
+    for s in reversed(range(0, T, step)):
+        y, state = lstm(x[s:s + step].flip(0)[None], state)
+        out[s:s + step, H:] = y[0].flip(0)  # rows s.. of x are read: this piece's output may replace them
+        out[s:s + step, :H] = forward[s:s + step]
+    return out
 
 
 def _one_thread(enabled: bool) -> contextlib.AbstractContextManager:
@@ -235,9 +256,10 @@ class FrameStream:
             flat -= origin
             flat *= scales
             flat += origin
-        if self.layers is not None:
+        if self.layers is not None:  # LAYER_FRAMES at a time: no second block-sized array
             curves, offsets = self.layers
-            flat += curves[start:stop] @ offsets
+            for a in range(0, n, LAYER_FRAMES):
+                flat[a:a + LAYER_FRAMES] += curves[start + a:min(start + a + LAYER_FRAMES, stop)] @ offsets
         if self.turns is not None:
             self.turns.apply(start, out)
         self.blocks_computed += 1
@@ -319,10 +341,10 @@ class FrameStream:
         if self.turns is not None:  # the eyeballs' turn, computed on their points only
             rows = (self.turns.indices[:, None] * 3 + np.arange(3)).reshape(-1)
             sub = basis[:, rows].T.astype(np.float64)
-            for s in range(0, len(states), 4096):
-                points = self.points(self.turns.indices, s, s + 4096)
+            for s in range(0, len(states), TURN_FRAMES):
+                points = self.points(self.turns.indices, s, s + TURN_FRAMES)
                 moved = self.turns.turn(s, points) - points
-                out[s:s + 4096] += moved.reshape(len(points), -1) @ sub
+                out[s:s + TURN_FRAMES] += moved.reshape(len(points), -1) @ sub
         return out
 
     def points(self, indices: np.ndarray, start: int = 0, stop: int | None = None) -> np.ndarray:

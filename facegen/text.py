@@ -314,8 +314,15 @@ def frame_features(
     still gets one frame: the frame holding its midpoint. If words overlap, the later word in the list
     wins the shared frames. Frames without a word are zeros, and parts of words outside the sequence
     are clipped. Each frame is then replaced by the mean over ``config.text_window`` (``[0]`` frames
-    before, itself, ``[1]`` after; see ``smooth_frames``).
+    before, itself, ``[1]`` after; see ``smooth_frames``). The same numbers as `word_frames` gives slice by
+    slice.
     """
+    return np.asarray(word_frames(words, vectors, num_frames, config))
+
+
+def word_frames(words: Sequence[TimedWord], vectors: np.ndarray, num_frames: int,
+                config: FeatureConfig) -> WordFrames:
+    """`frame_features` held as its words' vectors and each frame's word: a WordFrames."""
     fps = config.fps
     vectors = np.asarray(vectors, np.float32)
     if vectors.ndim != 2 or vectors.shape[0] != len(words):
@@ -323,7 +330,7 @@ def frame_features(
     if fps <= 0:
         raise ValueError(f"fps must be positive, got {fps}")
     num_frames = int(num_frames)
-    out = np.zeros((num_frames, vectors.shape[1]), np.float32)
+    owner = np.full(num_frames, -1, np.int64)
     if len(words) and num_frames > 0:
         starts = np.array([w.start for w in words], np.float64) * fps
         ends = np.array([w.end for w in words], np.float64) * fps
@@ -338,11 +345,63 @@ def frame_features(
         word_of = np.repeat(np.arange(len(words)), lengths)
         run_start = np.repeat(np.cumsum(lengths) - lengths, lengths)
         frame_of = np.repeat(first, lengths) + np.arange(word_of.size) - run_start
-        owner = np.full(num_frames, -1, np.int64)
         owner[frame_of] = word_of  # repeated frames: the last assignment (the later word) wins
-        spoken = owner >= 0
-        out[spoken] = vectors[owner[spoken]]
-    return smooth_frames(out, config.text_window, out=out)
+    return WordFrames(vectors, owner, config.text_window)
+
+
+class WordFrames:
+    """Text features [T, D] float32 (`frame_features`) held as the words' vectors and each frame's word
+    (-1: none), made when asked for: two hours at 25 fps are 276 MB as an array and a few MB of word vectors
+    here. Reads like a read-only array for the network (`shape`, `len()`, `[a:b]`, `np.asarray`). Slices read
+    in order (as the network's long pass reads them) cost one pass over the clip in all, and equal the
+    array's to the bit: the running sum of the frames before the slice is kept, and every sum is added in
+    the order smooth_frames adds it."""
+
+    dtype = np.dtype(np.float32)
+    ndim = 2
+
+    def __init__(self, vectors: np.ndarray, owner: np.ndarray, window: tuple[int, int]) -> None:
+        self.vectors, self.owner = vectors, owner
+        self.before, self.after = int(window[0]), int(window[1])
+        if self.before < 0 or self.after < 0:
+            raise ValueError(f"smoothing window must be non-negative, got {window}")
+        self.shape = (len(owner), vectors.shape[1])
+        self._first, self._running = 0, np.zeros((1, self.shape[1]), np.float64)  # sum of frames before first
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def raw(self, start: int, stop: int) -> np.ndarray:
+        """Frames start..stop before smoothing: each its word's vector, zeros between words."""
+        out = np.zeros((stop - start, self.shape[1]), np.float32)
+        owner = self.owner[start:stop]
+        out[owner >= 0] = self.vectors[owner[owner >= 0]]
+        return out
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        out = self.raw(0, len(self))
+        out = smooth_frames(out, (self.before, self.after), out=out)
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def __getitem__(self, key: slice) -> np.ndarray:
+        if not isinstance(key, slice) or key.step not in (None, 1):
+            raise TypeError("WordFrames are read in slices of consecutive frames")
+        n, (s, e, _) = len(self), key.indices(len(self))
+        e = max(s, e)
+        if self.before + self.after == 0:
+            return self.raw(s, e)
+        lo = max(s - self.before, 0)
+        if lo < self._first:  # read backwards: the running sum starts again
+            self._first, self._running = 0, np.zeros_like(self._running)
+        if lo > self._first:
+            self._running = np.cumsum(np.concatenate([self._running, self.raw(self._first, lo)]), axis=0,
+                                      dtype=np.float64)[-1:]
+            self._first = lo
+        csum = np.cumsum(np.concatenate([self._running, self.raw(lo, min(e + self.after, n))]), axis=0,
+                         dtype=np.float64)  # csum[k]: the sum of the frames before lo + k
+        t = np.arange(s, e)
+        a, b = np.maximum(t - self.before, 0), np.minimum(t + self.after + 1, n)
+        return ((csum[b - lo] - csum[a - lo]) / (b - a)[:, None]).astype(np.float32)
 
 
 SMOOTH_FRAMES = 4096  # frames smoothed at a time
@@ -389,16 +448,20 @@ def text_features(
     num_frames: int,
     config: FeatureConfig,
     language: str | None = None,
-) -> np.ndarray:
+    lazy: bool = False,
+) -> np.ndarray | WordFrames:
     """Per-frame smoothed text features ``[num_frames, backend.dim]`` float32 for timed words, at the fps
     and with the smoothing window of ``config`` (the bundle's features). Words of ``language`` (a code of
-    facegen.languages; None: English) are read as facegen.lexicons glosses them."""
+    facegen.languages; None: English) are read as facegen.lexicons glosses them. `lazy`: as a WordFrames
+    (the same numbers, made when the network reads them)."""
     from facegen.lexicons import glossed
 
     if not words:
-        return zero_features(num_frames, backend.dim)
-    vectors = backend.word_vectors(glossed([w.text for w in words], language))
-    return frame_features(words, vectors, num_frames, config)
+        vectors = np.zeros((0, backend.dim), np.float32)
+    else:
+        vectors = backend.word_vectors(glossed([w.text for w in words], language))
+    found = word_frames(words, vectors, num_frames, config)
+    return found if lazy else np.asarray(found)
 
 
 def zero_features(num_frames: int, dim: int) -> np.ndarray:

@@ -334,6 +334,31 @@ def test_the_smoothing_window_is_the_feature_configs():
     assert FeatureConfig.from_dict(old) == FeatureConfig()
 
 
+def test_word_frames_read_in_slices_equal_the_array_to_the_bit():
+    """The network's long pass reads the text features 4,096 frames at a time from a WordFrames (the words'
+    vectors and each frame's word: two hours are 276 MB as an array); every slice, in order, across the
+    smoothing's own 4,096-frame blocks, and read again from the start, is the array's to the bit."""
+    from facegen.text import SMOOTH_FRAMES, word_frames
+
+    rng = np.random.default_rng(5)
+    n = 3 * SMOOTH_FRAMES + 517
+    starts = np.sort(rng.uniform(0, n / 25, 900))
+    words = [W(f"w{i}", a, a + rng.uniform(0.05, 0.6)) for i, a in enumerate(starts)]
+    vectors = rng.normal(size=(len(words), 384)).astype(np.float32)
+    whole = frame_features(words, vectors, n, FeatureConfig())
+    lazy = word_frames(words, vectors, n, FeatureConfig())
+    assert lazy.shape == whole.shape == (n, 384) and len(lazy) == n
+    for step in (4096, 1000):
+        parts = np.concatenate([lazy[s:s + step] for s in range(0, n, step)])
+        np.testing.assert_array_equal(parts, whole)
+    np.testing.assert_array_equal(lazy[100:300], whole[100:300])  # backwards: starts again
+    np.testing.assert_array_equal(np.asarray(lazy), whole)
+    assert np.ascontiguousarray(lazy, np.float32).dtype == np.float32
+    assert 0.05 < float(np.abs(whole).mean()) and not np.isnan(whole).any()  # not all zeros
+    with pytest.raises(TypeError):
+        lazy[5]
+
+
 def test_frame_centre_rule_at_boundaries():
     eye = np.eye(2, dtype=np.float32)
     # at 25 fps frame t's centre is (t + 0.5) / 25: 0.02, 0.06, 0.10, ...
