@@ -99,6 +99,12 @@ def face_colors(faces: np.ndarray, regions: dict[str, np.ndarray], num_vertices:
     return colors
 
 
+def srgb_to_linear(rgb) -> np.ndarray:
+    """Linear RGB float32 of sRGB display values (the inverse of `Material.srgb`)."""
+    c = np.asarray(rgb, np.float32)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
 def lip_blend(faces: np.ndarray, lips: np.ndarray, num_vertices: int, rings: int = 3) -> np.ndarray:
     """How much of the lips' colour each vertex takes, [V] in [0, 1]: 1 inside the lips, 0 outside, and a
     smooth ramp over `rings` rings of neighbours across the lips' edge (neighbour averaging)."""
