@@ -30,7 +30,7 @@ Layout of a written file:
                    also written as a WAV beside the file (`out.wav`): Blender and most DCCs ignore the
                    extension and take the sidecar.
     parts          with parts (an Animation from the network): nodes LeftEye, RightEye, UpperTeeth,
-                   LowerTeeth, Tongue under "Face", their meshes, materials and channels (gltf_parts.py)
+                   LowerTeeth, Tongue, EyeSockets under "Face" with meshes, materials, channels: gltf_parts.py
     asset.extras   facegen: version, fps, frames, duration, rig, morphTargets (targets in the file),
                    tolerance, reconstructionError (largest vertex error / face size),
                    reconstructionErrorUnits, faceSize, metersPerUnit, lipErrorMm and faceErrorMm (arkit:

@@ -7,10 +7,10 @@ colours as USD's GeomSubsets and the preview), under the material "Face" whose b
 multiplies the two: Blender, three.js, Babylon.js and Godot show the colours). A face that names none of
 those regions keeps the plain "Skin" material (exchange/surface.py) and no COLOR_0.
 
-Each part is a node (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue) under "Face" (so it shares its
-scale and the head's motion), at its pivot, with a mesh of its own: one primitive per material of
-face/materials.py (the eyes: Pupil, Iris, EyeWhite), POSITION, NORMAL and indices. The animation "speech"
-gains `rotation` channels (the eyes with the gaze; the lower teeth and the tongue with the jaw),
+Each part is a node (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue, EyeSockets) under "Face" (so it
+shares its scale and the head's motion), at its pivot, with a mesh of its own: one primitive per material
+of face/materials.py (the eyes: Pupil, Iris, EyeWhite), POSITION, NORMAL and indices. The animation
+"speech" gains `rotation` channels (the eyes with the gaze; the lower teeth and the tongue with the jaw),
 `translation` channels (the jaw's hinge) and the tongue's `weights` (its morph targets "tipUp",
 "tipForward").
 """

@@ -40,6 +40,7 @@ MATERIALS: dict[str, Material] = {m.name: m for m in (
     Material("Teeth", (0.80, 0.76, 0.64), 0.3),
     Material("Tongue", (0.50, 0.13, 0.13), 0.5),
     Material("MouthInterior", (0.10, 0.022, 0.022), 0.7),
+    Material("Conjunctiva", (0.58, 0.26, 0.23), 0.35),  # the eye sockets' lining (facegen.face.parts)
 )}
 SKIN = "Skin"
 # the face's regions that wear another material than skin (facegen.face.regions' names)
