@@ -4,7 +4,7 @@ The face (its one primitive, so every reader, Blender included, gets its 23,370 
 wears its regions' colours as COLOR_0: per vertex, the linear RGB of face/materials.py's `face_colors` (lips,
 the lips' edge blended into the skin over a few millimetres, eye whites, the mouth's inside; the same
 colours as USD's GeomSubsets and the preview), under the material "Face" whose base colour is white (glTF
-multiplies the two: Blender, three.js, Babylon.js and Godot show the colours). A face that names none of
+multiplies the two: Blender and three.js show the colours; docs/dcc.md). A face that names none of
 those regions keeps the plain "Skin" material (exchange/surface.py) and no COLOR_0.
 
 Each part is a node (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue, EyeSockets) under "Face" (so it
