@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from facegen.face.mesh import vertex_normals
 from facegen.face.rig import eyeballs, face_scale
 
 EYE_MARGIN_CM = 0.05  # the part eyeball's radius over the face's eyeball cap (lids' shell: +0.13 cm)
@@ -275,10 +274,11 @@ def eye_rims(template: np.ndarray, faces: np.ndarray, regions: dict[str, np.ndar
     for r in ("left_eyeball", "right_eyeball", "mouth_cavity"):
         inner[np.asarray(regions[r], np.int64)] = True
     f = f[~inner[f].any(1)]
-    edges, counts = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1),
-                              axis=0, return_counts=True)
+    pairs = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
+    keys, counts = np.unique(pairs[:, 0] * len(template) + pairs[:, 1], return_counts=True)
     nxt: dict[int, list[int]] = {}
-    for a, b in edges[counts == 1].tolist():
+    for a, b in zip(*np.divmod(keys[counts == 1], len(template)), strict=True):
+        a, b = int(a), int(b)
         nxt.setdefault(a, []).append(b)
         nxt.setdefault(b, []).append(a)
     loops, seen = [], set()
@@ -289,7 +289,7 @@ def eye_rims(template: np.ndarray, faces: np.ndarray, regions: dict[str, np.ndar
         while True:
             seen.add(cur)
             step = next((n for n in nxt[cur] if n != prev), None)
-            if step is None or step == start:
+            if step is None or step in seen:  # back at the start (or at a vertex met before)
                 break
             loop.append(step)
             prev, cur = cur, step
@@ -344,10 +344,16 @@ def face_parts(template: np.ndarray, regions: dict[str, np.ndarray], faces: np.n
     centre = mouth + np.array([0.0, -0.38, z_front - TONGUE_CM[2]]) * cm
     parts.append(Part("Tongue", tv + (centre - hinge).astype(np.float32), tf, [("Tongue", 0, len(tf))],
                       hinge.astype(np.float32), targets))
-    normals = vertex_normals(t, faces).astype(np.float64)
+    rims = eye_rims(t, faces, reg, centres)
+    around = np.asarray(faces, np.int64)
+    around = around[np.isin(around, np.concatenate(rims)).any(1)]  # the rims' triangles: their normals
+    cross = np.cross(t[around[:, 1]] - t[around[:, 0]], t[around[:, 2]] - t[around[:, 0]])
+    normals = np.zeros_like(t)  # area-weighted, as face/mesh.py's vertex_normals (without loading numba)
+    for k in range(3):
+        np.add.at(normals, around[:, k], cross)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     between = centres.mean(0)
-    sockets = [_socket(t, normals, rim, c, r, cm)
-               for rim, c, r in zip(eye_rims(t, faces, reg, centres), centres, radii, strict=True)]
+    sockets = [_socket(t, normals, rim, c, r, cm) for rim, c, r in zip(rims, centres, radii, strict=True)]
     v, f, groups = _group_mesh([("Conjunctiva", sv - between, sf) for sv, sf in sockets])
     parts.append(Part("EyeSockets", v, f, groups, between.astype(np.float32)))
     return parts
