@@ -1,11 +1,14 @@
 """The face's regions coloured in glTF as in USD and the preview (exchange/gltf_parts.py): COLOR_0 on the
 face's one primitive holds face/materials.py's colours per vertex (lips, eye whites, the mouth's inside, the
 lips' edge blended), under the white "Face" material; the 23,370 vertices keep their order and positions in
-facegen's reader, in Blender, and `facegen render` of the file paints the lips."""
+facegen's reader and in Blender; Blender and three.js show the colours, and `facegen render` of the file
+paints the lips."""
 
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
 from dataclasses import replace
@@ -152,3 +155,44 @@ def test_blender_shows_the_lips(clip, glb, tmp_path):
     for name, idx in region_vertices(clip).items():  # Blender keeps 8-bit colours: within 1/255-ish
         assert np.abs(colors[idx] - MATERIALS[name].color).max() < 0.01, name
     assert np.abs(colors[region_vertices(clip)["Lips"]] - MATERIALS["Skin"].color).min(0).max() > 0.15
+
+
+THREE_SCRIPT = """
+import { readFileSync } from 'node:fs';
+import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
+const data = readFileSync(process.argv[2]);
+const ids = JSON.parse(readFileSync(process.argv[3], 'utf8'));
+new GLTFLoader().parse(data.buffer.slice(data.byteOffset, data.byteOffset + data.byteLength), '', (gltf) => {
+  const size = (o) => o.geometry.attributes.position.count;
+  let face = null;
+  gltf.scene.traverse((o) => { if (o.isMesh && (!face || size(o) > size(face))) face = o; });
+  const color = face.geometry.attributes.color;
+  console.log('RESULT ' + JSON.stringify({material: face.material.name,
+    vertexColors: face.material.vertexColors, count: size(face),
+    colors: Object.fromEntries(Object.entries(ids).map(([k, v]) => [k, v.map((i) => color.getX(i) + ',' +
+      color.getY(i) + ',' + color.getZ(i))]))}));
+}, (error) => { console.error(String(error)); process.exit(1); });
+"""
+
+
+def test_threejs_shows_the_lips(clip, glb, tmp_path):
+    """three.js's GLTFLoader (the npm package of `make node-deps`, in node): the face's material gets
+    `vertexColors` (so COLOR_0 multiplies its white base colour) and each region's vertices its colour."""
+    modules = REPO / "facegen" / "assets" / "node_modules"
+    if not (shutil.which("node") and (modules / "three" / "package.json").is_file()):
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail("node or the npm package three is missing in CI: `make node-deps` should have run")
+        pytest.skip("node or the npm package three is missing: run `make node-deps`")
+    (tmp_path / "node_modules").symlink_to(modules, target_is_directory=True)
+    (tmp_path / "check.mjs").write_text(THREE_SCRIPT)
+    groups = {k: v[:: max(1, len(v) // 20)].tolist() for k, v in region_vertices(clip).items()}
+    (tmp_path / "ids.json").write_text(json.dumps(groups))
+    run = subprocess.run(["node", "check.mjs", str(glb), "ids.json"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120, check=False)
+    line = next((x for x in run.stdout.splitlines() if x.startswith("RESULT ")), None)
+    assert run.returncode == 0 and line, run.stdout[-2000:] + run.stderr[-2000:]
+    seen = json.loads(line[7:])
+    assert seen["material"] == "Face" and seen["vertexColors"] is True and seen["count"] == 23370, seen
+    for name, colors in seen["colors"].items():
+        got = np.array([[float(x) for x in c.split(",")] for c in colors])
+        assert np.allclose(got, MATERIALS[name].color, atol=1e-5), name
