@@ -94,7 +94,8 @@ class Animation:
         frames = self.vertices.points(chin) if self.streamed else np.asarray(self.vertices)[:, chin]
         hinge = np.asarray(self.template, np.float64)[np.asarray(self.regions["jaw_hinge"])].mean(0)
         angle, hinge_at = p.jaw_motion(np.asarray(self.template, np.float64)[chin], frames, hinge)
-        tracks = p.part_tracks(p.face_parts(self.template, self.regions), self.parts, angle, hinge_at)
+        parts = p.face_parts(self.template, self.regions, self.faces)
+        tracks = p.part_tracks(parts, self.parts, angle, hinge_at)
         self._part_tracks = (self.vertices, tracks)
         return tracks
 

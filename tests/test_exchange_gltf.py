@@ -226,7 +226,7 @@ def test_base_mesh_is_the_template_and_frames_are_reproduced(clip, tmp_path):
     assert np.array_equal(read_animation(out).template, clip.template)
 
 
-def test_uvs_and_skin_material(clip, tmp_path):
+def test_uvs(clip, tmp_path):
     out = tmp_path / "skin.glb"
     write_animation(clip, out, write_audio=False)
     doc = _doc(out)
@@ -240,10 +240,7 @@ def test_uvs_and_skin_material(clip, tmp_path):
     left, right = np.argmin(clip.template[:, 0]), np.argmax(clip.template[:, 0])
     assert uv[left, 0] < 0.5 < uv[right, 0]
     assert np.allclose(uv, surface.face_uvs(clip.template) * [1, -1] + [0, 1])  # stable: the template's
-    material = doc.materials[prim.material]
-    pbr = material.pbrMetallicRoughness
-    assert material.name == "Skin" and pbr.baseColorFactor == pytest.approx([*surface.SKIN_COLOR, 1.0])
-    assert pbr.metallicFactor == 0.0 and pbr.roughnessFactor == pytest.approx(0.6)
+    # the material and the regions' colours: tests/test_gltf_colors.py
 
 
 def test_mp3_is_in_sync_with_the_motion(clip, tmp_path):

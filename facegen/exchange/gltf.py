@@ -8,7 +8,8 @@ Layout of a written file:
                    rotation is animated; a global KHR_audio_emitter emitter playing the clip's sound when
                    there is audio
     mesh "Face"    one triangle primitive: POSITION (the template: the neutral face, a real pose, which
-                   static readers show), NORMAL, TEXCOORD_0 (exchange/surface.py's UVs, v down), indices
+                   static readers show), NORMAL, TEXCOORD_0 (exchange/surface.py's UVs, v down), COLOR_0
+                   (the regions' colours, when the face names them: gltf_parts.py), indices
                    (uint16 when V < 65536), material 0; morph `targets` of POSITION and NORMAL offsets
                    (morph_targets.py, by `rig`): "pca" (default) a PCA of the clip's offsets, K the fewest
                    that keep the largest vertex error under `tolerance` x the face size (default 1e-3), or
@@ -18,7 +19,8 @@ Layout of a written file:
                    clamps shape keys to that range). NORMAL offsets make the blended normals follow the
                    moving surface (least squares over the frames). mesh.weights = frame 0's weights;
                    mesh.extras.targetNames names the targets (three.js and Blender read it).
-    material 0     "Skin": pbrMetallicRoughness, base colour surface.SKIN_COLOR, metallic 0, roughness 0.6
+    material 0     "Face" (white base colour x COLOR_0) or, for a face without coloured regions, "Skin"
+                   (base colour surface.SKIN_COLOR); metallic 0, roughness 0.6
     animation      "speech": a channel of the Face node's `weights`, LINEAR sampler, input times frame /
                    fps (0 .. (T-1)/fps), output T x K weights; with head motion a second, the Head node's
                    `rotation` (T unit quaternions) on the same times
@@ -28,7 +30,7 @@ Layout of a written file:
                    also written as a WAV beside the file (`out.wav`): Blender and most DCCs ignore the
                    extension and take the sidecar.
     parts          with parts (an Animation from the network): nodes LeftEye, RightEye, UpperTeeth,
-                   LowerTeeth, Tongue under "Face", their meshes, materials and channels (gltf_parts.py)
+                   LowerTeeth, Tongue, EyeSockets under "Face" with meshes, materials, channels: gltf_parts.py
     asset.extras   facegen: version, fps, frames, duration, rig, morphTargets (targets in the file),
                    tolerance, reconstructionError (largest vertex error / face size),
                    reconstructionErrorUnits, faceSize, metersPerUnit, lipErrorMm and faceErrorMm (arkit:
@@ -54,10 +56,10 @@ from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import mp3
 from facegen.exchange.formats import by_module
-from facegen.exchange.gltf_parts import add_parts
+from facegen.exchange.gltf_parts import add_parts, face_surface
 from facegen.exchange.morph_targets import normal_deltas, targets_as_written, writer_basis
 from facegen.exchange.pca import MorphBasis
-from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
+from facegen.exchange.surface import face_uvs
 from facegen.exchange.wav import atomic_with_sidecar, sidecar_path
 from facegen.face.mesh import Mesh, check_topology, vertex_normals
 
@@ -172,12 +174,12 @@ def build(
     time_input = accessor(times.astype(np.float32), "SCALAR", None, with_bounds=True)
     weight_output = accessor(weights.reshape(-1), "SCALAR", None)
 
-    primitive = g.Primitive(attributes=g.Attributes(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord),
+    skin, colors = face_surface(anim, accessor)  # gltf_parts.py: the regions' colours as COLOR_0
+    primitive = g.Primitive(attributes=g.Attributes(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord,
+                                                    COLOR_0=colors),
                             indices=indices, mode=g.TRIANGLES, targets=targets, material=0)
     mesh = g.Mesh(name="Face", primitives=[primitive], weights=weights[0].astype(float).tolist(),
                   extras={"targetNames": names})
-    skin = g.Material(name=MATERIAL_NAME, pbrMetallicRoughness=g.PbrMetallicRoughness(
-        baseColorFactor=[*SKIN_COLOR, 1.0], metallicFactor=SKIN_METALLIC, roughnessFactor=SKIN_ROUGHNESS))
     node = g.Node(name="Face", mesh=0, scale=[float(meters_per_unit)] * 3)
     nodes = [node]
     samplers = [g.AnimationSampler(input=time_input, output=weight_output, interpolation="LINEAR")]

@@ -1,11 +1,18 @@
-"""glTF: the parts beside the face (facegen.face.parts) as child nodes of the "Face" node.
+"""glTF: the face's colours per region and the parts beside the face (facegen.face.parts).
 
-Each part is a node (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue) under "Face" (so it shares its
-scale and the head's motion), at its pivot, with a mesh of its own: one primitive per material of
-face/materials.py (the eyes: Pupil, Iris, EyeWhite), POSITION, NORMAL and indices. The animation "speech"
-gains `rotation` channels (the eyes with the gaze; the lower teeth and the tongue with the jaw),
+The face (its one primitive, so every reader, Blender included, gets its 23,370 vertices in their order)
+wears its regions' colours as COLOR_0: per vertex, the linear RGB of face/materials.py's `face_colors` (lips,
+the lips' edge blended into the skin over a few millimetres, eye whites, the mouth's inside; the same
+colours as USD's GeomSubsets and the preview), under the material "Face" whose base colour is white (glTF
+multiplies the two: Blender and three.js show the colours; docs/dcc.md). A face that names none of
+those regions keeps the plain "Skin" material (exchange/surface.py) and no COLOR_0.
+
+Each part is a node (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue, EyeSockets) under "Face" (so it
+shares its scale and the head's motion), at its pivot, with a mesh of its own: one primitive per material
+of face/materials.py (the eyes: Pupil, Iris, EyeWhite), POSITION, NORMAL and indices. The animation
+"speech" gains `rotation` channels (the eyes with the gaze; the lower teeth and the tongue with the jaw),
 `translation` channels (the jaw's hinge) and the tongue's `weights` (its morph targets "tipUp",
-"tipForward"). The face keeps its one primitive (Blender would duplicate the vertices of a split one).
+"tipForward").
 """
 
 from __future__ import annotations
@@ -13,11 +20,31 @@ from __future__ import annotations
 import numpy as np
 
 from facegen.animation import Animation
-from facegen.face.materials import MATERIALS
+from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS
+from facegen.face.materials import MATERIALS, SKIN, face_colors, srgb_to_linear
 from facegen.face.mesh import vertex_normals
 from facegen.face.parts import quaternions
 
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+
+
+FACE_MATERIAL = "Face"
+
+
+def face_surface(anim: Animation, accessor) -> tuple[object, int | None]:
+    """The face's pygltflib Material and its COLOR_0 accessor (None when the face names no coloured
+    region: the plain skin)."""
+    import pygltflib as g
+
+    colors = face_colors(anim.faces, anim.regions, anim.num_vertices)
+    if colors is None:
+        return g.Material(name=MATERIAL_NAME, pbrMetallicRoughness=g.PbrMetallicRoughness(
+            baseColorFactor=[*SKIN_COLOR, 1.0], metallicFactor=SKIN_METALLIC,
+            roughnessFactor=SKIN_ROUGHNESS)), None
+    skin = MATERIALS[SKIN]
+    material = g.Material(name=FACE_MATERIAL, pbrMetallicRoughness=g.PbrMetallicRoughness(
+        baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=skin.metallic, roughnessFactor=skin.roughness))
+    return material, accessor(srgb_to_linear(colors), "VEC3", ARRAY_BUFFER)
 
 
 def add_parts(anim: Animation, accessor, nodes: list, meshes: list, materials: list, samplers: list,

@@ -6,10 +6,11 @@ Layout added to a written stage (exchange/usd.py) when the Animation has parts:
                              (diffuseColor, roughness, metallic) that a surface wears
     /Face/Mesh               GeomSubsets (familyName materialBind, elementType face) "Lips", "EyeWhite",
                              "MouthInterior" (and "Skin", the rest), each bound to its material
-    /Face/<Part>             Xform per part (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue): xformOp
-                             translate (where its pivot is) and orient (a quaternion); time-sampled per frame
-                             where the part moves (the eyes turn with the gaze, the lower teeth and the
-                             tongue with the jaw), a constant value where it does not (the upper teeth)
+    /Face/<Part>             Xform per part (LeftEye, RightEye, UpperTeeth, LowerTeeth, Tongue, EyeSockets):
+                             xformOp translate (where its pivot is) and orient (a quaternion); time-sampled
+                             per frame where the part moves (the eyes turn with the gaze, the lower teeth
+                             and the tongue with the jaw), a constant value where it does not (the upper
+                             teeth, the eye sockets' lining)
     /Face/<Part>/<Part>Mesh  Mesh in the part's own coordinates (about its pivot), its GeomSubsets per
                              material bound (the eyes: Pupil, Iris, EyeWhite); the tongue's points have one
                              time sample per frame (its tip rising and coming forward)

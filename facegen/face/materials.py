@@ -40,6 +40,7 @@ MATERIALS: dict[str, Material] = {m.name: m for m in (
     Material("Teeth", (0.80, 0.76, 0.64), 0.3),
     Material("Tongue", (0.50, 0.13, 0.13), 0.5),
     Material("MouthInterior", (0.10, 0.022, 0.022), 0.7),
+    Material("Conjunctiva", (0.58, 0.26, 0.23), 0.35),  # the eye sockets' lining (facegen.face.parts)
 )}
 SKIN = "Skin"
 # the face's regions that wear another material than skin (facegen.face.regions' names)
@@ -97,6 +98,12 @@ def face_colors(faces: np.ndarray, regions: dict[str, np.ndarray], num_vertices:
         soft = (w > 0) & (w < 1)
         colors[soft[:, 0]] = (skin + w * (lips - skin))[soft[:, 0]]
     return colors
+
+
+def srgb_to_linear(rgb) -> np.ndarray:
+    """Linear RGB float32 of sRGB display values (the inverse of `Material.srgb`)."""
+    c = np.asarray(rgb, np.float32)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
 def lip_blend(faces: np.ndarray, lips: np.ndarray, num_vertices: int, rings: int = 3) -> np.ndarray:

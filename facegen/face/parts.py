@@ -12,7 +12,12 @@ USD Xforms and glTF nodes carry), the tongue also by two morph targets:
   upper set is fixed to the skull, the lower set turns with the jaw about the jaw hinge's axis (x);
 - the tongue: a flattened ellipsoid on the jaw behind the lower teeth; targets "tipUp" (t, d, n, l: the tip
   rises to the ridge behind the upper teeth) and "tipForward" (th and ARKit tongueOut: the tip comes
-  forward between the teeth).
+  forward between the teeth);
+- the eye sockets: the skin's eye openings are wider than the eyeballs (the inner corners lie 7.7 mm beyond
+  the sphere, in front of it), so a side view looked through the corner into the empty head. Each socket is
+  a lining (the conjunctiva) from the opening's rim, tucked SOCKET_TUCK_CM under the skin beyond it, back
+  into the eyeball: every line of sight through the opening meets the eyeball or the lining. Still, like
+  the upper teeth.
 
 The jaw's motion is not a channel of the network: `jaw_motion` finds it per frame from the chin's vertices
 (deep in the rig's jaw region, where the jaw's weight is 1): the rotation about the hinge's x axis and the
@@ -34,7 +39,8 @@ LOWER_TEETH = (0.55, 0.58, 0.64, 0.66, 0.70)
 TOOTH_DEPTH = 0.28  # cm front to back
 TONGUE_CM = (1.55, 0.33, 1.2)  # semi-axes x, y, z
 TONGUE_RAISE_CM, TONGUE_FORWARD_CM = 0.8, 0.45
-PART_NAMES = ("LeftEye", "RightEye", "UpperTeeth", "LowerTeeth", "Tongue")
+SOCKET_TUCK_CM, SOCKET_DEPTH_CM = 0.2, 0.05  # the lining's reach under the skin past the rim, and its depth
+PART_NAMES = ("LeftEye", "RightEye", "UpperTeeth", "LowerTeeth", "Tongue", "EyeSockets")
 
 
 @dataclass
@@ -259,14 +265,70 @@ def _tongue(cm: float) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     return (local * cm).astype(np.float32), f.astype(np.int32), targets
 
 
-def face_parts(template: np.ndarray, regions: dict[str, np.ndarray]) -> list[Part]:
-    """The parts of a face (its rest pose `template` and `regions`, see `has_parts`), in PART_NAMES order."""
+def eye_rims(template: np.ndarray, faces: np.ndarray, regions: dict[str, np.ndarray],
+             centres: np.ndarray) -> list[np.ndarray]:
+    """Each eye's opening in the skin: the face's vertex indices around it, in order along the loop (the
+    skin's boundary loop nearest each eyeball centre; the eyeball caps and the mouth cavity left out)."""
+    f = np.asarray(faces, np.int64)
+    inner = np.zeros(len(template), bool)
+    for r in ("left_eyeball", "right_eyeball", "mouth_cavity"):
+        inner[np.asarray(regions[r], np.int64)] = True
+    f = f[~inner[f].any(1)]
+    pairs = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
+    keys, counts = np.unique(pairs[:, 0] * len(template) + pairs[:, 1], return_counts=True)
+    nxt: dict[int, list[int]] = {}
+    for a, b in zip(*np.divmod(keys[counts == 1], len(template)), strict=True):
+        a, b = int(a), int(b)
+        nxt.setdefault(a, []).append(b)
+        nxt.setdefault(b, []).append(a)
+    loops, seen = [], set()
+    for start in nxt:
+        if start in seen:
+            continue
+        loop, prev, cur = [start], -1, start
+        while True:
+            seen.add(cur)
+            step = next((n for n in nxt[cur] if n != prev), None)
+            if step is None or step in seen:  # back at the start (or at a vertex met before)
+                break
+            loop.append(step)
+            prev, cur = cur, step
+        loops.append(np.asarray(loop, np.int64))
+    t = np.asarray(template, np.float64)
+    return [min(loops, key=lambda lp: float(np.linalg.norm(t[lp].mean(0) - c))) for c in centres]
+
+
+def _socket(template: np.ndarray, normals: np.ndarray, rim: np.ndarray, centre: np.ndarray, radius: float,
+            cm: float) -> tuple[np.ndarray, np.ndarray]:
+    """One eye's socket lining: three loops along the rim (tucked under the skin beyond it, just behind
+    the rim, inside the eyeball) joined by quads; its triangles face the opening."""
+    t, n = np.asarray(template, np.float64)[rim], normals[rim]
+    out = t - t.mean(0)
+    out -= (out * n).sum(1, keepdims=True) * n  # away from the opening, along the skin
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    behind = t - SOCKET_DEPTH_CM * cm * n
+    ray = behind - centre
+    inside = centre + 0.85 * radius * ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    loops = [behind + SOCKET_TUCK_CM * cm * out, behind, inside]
+    k = len(rim)
+    i, j = np.arange(k), (np.arange(k) + 1) % k
+    tris = np.concatenate([np.concatenate([np.stack([a + i, a + j, a + k + j], 1),
+                                           np.stack([a + i, a + k + j, a + k + i], 1)]) for a in (0, k)])
+    v = np.concatenate(loops)
+    a, b, c = v[tris[:, 0]], v[tris[:, 1]], v[tris[:, 2]]
+    facing = (np.cross(b - a, c - a) * (centre + 2 * radius * n.mean(0) - (a + b + c) / 3)).sum(1)
+    return v, (tris if np.sum(facing > 0) >= len(tris) / 2 else tris[:, ::-1])
+
+
+def face_parts(template: np.ndarray, regions: dict[str, np.ndarray], faces: np.ndarray) -> list[Part]:
+    """The parts of a face (its rest pose `template`, `regions`, see `has_parts`, and triangles `faces`), in
+    PART_NAMES order."""
     t = np.asarray(template, np.float64)
     reg = {k: np.asarray(v, np.int64) for k, v in regions.items()}
     centres, axes = eyeballs(t, reg)
     _, cm = face_scale(t, reg)
-    parts = [_eye(name, c, float(a[1:].min()) + EYE_MARGIN_CM * cm, cm)
-             for name, c, a in zip(("LeftEye", "RightEye"), centres, axes, strict=True)]
+    radii = [float(a[1:].min()) + EYE_MARGIN_CM * cm for a in axes]
+    parts = [_eye(name, c, r, cm) for name, c, r in zip(("LeftEye", "RightEye"), centres, radii, strict=True)]
     mouth = (t[reg["mouth_upper_margin"]].mean(0) + t[reg["mouth_lower_margin"]].mean(0)) / 2
     cav = (t[reg["mouth_cavity"]] - mouth) / cm
     upper_wall = _wall(cav[cav[:, 1] > 0.45])
@@ -282,6 +344,18 @@ def face_parts(template: np.ndarray, regions: dict[str, np.ndarray]) -> list[Par
     centre = mouth + np.array([0.0, -0.38, z_front - TONGUE_CM[2]]) * cm
     parts.append(Part("Tongue", tv + (centre - hinge).astype(np.float32), tf, [("Tongue", 0, len(tf))],
                       hinge.astype(np.float32), targets))
+    rims = eye_rims(t, faces, reg, centres)
+    around = np.asarray(faces, np.int64)
+    around = around[np.isin(around, np.concatenate(rims)).any(1)]  # the rims' triangles: their normals
+    cross = np.cross(t[around[:, 1]] - t[around[:, 0]], t[around[:, 2]] - t[around[:, 0]])
+    normals = np.zeros_like(t)  # area-weighted, as face/mesh.py's vertex_normals (without loading numba)
+    for k in range(3):
+        np.add.at(normals, around[:, k], cross)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    between = centres.mean(0)
+    sockets = [_socket(t, normals, rim, c, r, cm) for rim, c, r in zip(rims, centres, radii, strict=True)]
+    v, f, groups = _group_mesh([("Conjunctiva", sv - between, sf) for sv, sf in sockets])
+    parts.append(Part("EyeSockets", v, f, groups, between.astype(np.float32)))
     return parts
 
 
@@ -318,8 +392,8 @@ def jaw_motion(rest: np.ndarray, frames: np.ndarray, hinge: np.ndarray) -> tuple
 def part_tracks(parts: list[Part], drivers: PartDrivers, jaw_angle: np.ndarray,
                 hinge_at: np.ndarray) -> list[PartTrack]:
     """Every part's motion over T frames: the eyes turned by the gaze about their centres, the upper teeth
-    still, the lower teeth and the tongue with the jaw (`jaw_angle` [T], `hinge_at` [T, 3]), the tongue's
-    targets weighted by the drivers."""
+    and the eye sockets still, the lower teeth and the tongue with the jaw (`jaw_angle` [T], `hinge_at`
+    [T, 3]), the tongue's targets weighted by the drivers."""
     T = len(jaw_angle)
     gaze = np.radians(np.asarray(drivers.gaze, np.float64)).reshape(T, 2)
     eye_rot = gaze_rotations(gaze[:, 0], gaze[:, 1])
@@ -330,7 +404,7 @@ def part_tracks(parts: list[Part], drivers: PartDrivers, jaw_angle: np.ndarray,
         pivot = np.broadcast_to(np.asarray(part.pivot, np.float64), (T, 3))
         if part.name in ("LeftEye", "RightEye"):
             out.append(PartTrack(part, eye_rot, pivot))
-        elif part.name == "UpperTeeth":
+        elif part.name in ("UpperTeeth", "EyeSockets"):
             out.append(PartTrack(part, still, pivot))
         else:
             weights = np.asarray(drivers.tongue, np.float64).reshape(T, 2) if part.targets else None

@@ -228,23 +228,16 @@ def _read_input(
 
 
 def _with_parts(anim: Animation) -> Animation:
-    """A file facegen wrote from speech, drawn with its parts as the preview draws them: the gaze from its
-    metadata's saccades, the jaw read from its chin; the tongue at rest (files keep no phones). A face
-    without the regions the parts fit to gets the built-in face's when it has its topology."""
+    """A file facegen wrote, drawn as the preview draws it: a face without the regions its colours and parts
+    fit to gets the built-in face's when it has its topology (so a .glb or .usd of it shows its lips, eye
+    whites and mouth); one from speech (saccades in its metadata) gets its parts: the gaze from the
+    saccades, the jaw read from its chin, the tongue at rest (files keep no phones)."""
     import json
     from dataclasses import replace
 
     from facegen.face.parts import PartDrivers, has_parts
     from facegen.gaze import Saccade, gaze_curve
 
-    saccades = anim.metadata.get("saccades")
-    if anim.parts is not None or saccades is None:
-        return anim
-    try:
-        found = [Saccade(*map(float, s)) for s in (json.loads(saccades) if isinstance(saccades, str)
-                                                     else saccades)]
-    except (TypeError, ValueError):
-        return anim
     regions = anim.regions
     if not has_parts(regions):
         from facegen.face.template import load_template
@@ -253,9 +246,17 @@ def _with_parts(anim: Animation) -> Animation:
         if face.num_vertices != anim.num_vertices or not np.array_equal(face.faces, anim.faces):
             return anim
         regions = face.regions
+        anim = replace(anim, regions=dict(regions))
+    saccades = anim.metadata.get("saccades")
+    if anim.parts is not None or saccades is None:
+        return anim
+    try:
+        found = [Saccade(*map(float, s)) for s in (json.loads(saccades) if isinstance(saccades, str)
+                                                     else saccades)]
+    except (TypeError, ValueError):
+        return anim
     gaze = gaze_curve(found, anim.num_frames, anim.fps)
-    return replace(anim, regions=dict(regions),
-                   parts=PartDrivers(gaze, np.zeros((anim.num_frames, 2), np.float32)))
+    return replace(anim, parts=PartDrivers(gaze, np.zeros((anim.num_frames, 2), np.float32)))
 
 
 def _default_template(path: Path) -> Mesh:

@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.face.materials import MATERIALS, REGION_MATERIALS
+from facegen.face.materials import MATERIALS, REGION_MATERIALS, srgb_to_linear
 from facegen.face.mesh import vertex_normals
 
 VIEWS: dict[str, float] = {"front": 0.0, "three_quarter": 40.0, "profile": 90.0}  # yaw, degrees
@@ -336,11 +336,6 @@ def _srgb_table(n: int = 4096) -> np.ndarray:
     v = np.linspace(0.0, 1.0, n)
     v = np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
     return np.round(v * 255).astype(np.uint8)
-
-
-def srgb_to_linear(rgb: np.ndarray | Sequence[float]) -> np.ndarray:
-    c = np.asarray(rgb, np.float32)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
 def heat_colors(values: np.ndarray, vmax: float) -> np.ndarray:
