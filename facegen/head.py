@@ -132,6 +132,12 @@ def head_motion(samples: np.ndarray, sample_rate: int, pauses: list[tuple[float,
     return out.astype(np.float32)
 
 
+def has_pivot(regions: dict) -> bool:
+    """True when a face with these regions has the jaw hinge its head turns about (`pivot`): without it the
+    head stays still."""
+    return "jaw_hinge" in regions
+
+
 def pivot(template: np.ndarray, regions: dict) -> np.ndarray:
     """The point the head turns about [3] (mesh units): the top of the neck, below and behind the jaw
     hinge."""
