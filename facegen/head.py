@@ -49,6 +49,7 @@ DRIFT_TAU_S = 1.2
 LIMIT_DEG = 8.0
 SMOOTH_S = 0.04
 PIVOT_BELOW_HINGE_CM, PIVOT_BEHIND_HINGE_CM = 3.0, 1.5
+DEFAULT_AMOUNT = 1.0  # `--head-motion` when not given: as people move theirs
 
 
 def check_amount(amount: float) -> float:

@@ -29,8 +29,7 @@ from pathlib import Path
 from facegen.animation import DEFAULT_FPS
 from facegen.blinks import DEFAULT_RATE
 from facegen.exchange.formats import FORMATS, format_of
-
-DEFAULT_HEAD_MOTION = 1.0  # facegen.head's amount when not asked for (the CLI's and batch's default)
+from facegen.head import DEFAULT_AMOUNT
 
 
 @dataclass(frozen=True)
@@ -67,7 +66,7 @@ _RECORDED = "; recorded in the metadata"
 CONTROLS: tuple[Control, ...] = (
     Control("blink_rate", "--blink-rate", DEFAULT_RATE, _cells("the lids' vertices", "eyeBlinkLeft/Right")),
     Control("seed", "--seed", 0, _cells("same seed, same file", "same seed, same file")),
-    Control("head_motion", "--head-motion", DEFAULT_HEAD_MOTION, _cells(
+    Control("head_motion", "--head-motion", DEFAULT_AMOUNT, _cells(
         "/Face's xformOp:rotateZXY:head samples", "",
         glTF="node Head's rotation channel",
         NumPy="beside it: NAME.head.npy ([T, 3] yaw, pitch, roll degrees); the .npy stays face-local",
@@ -130,6 +129,7 @@ def dropped(path: str | os.PathLike, controls: dict[str, object]) -> list[str]:
         value = controls.get(control.name, control.default)
         if loss is None or value is None or value == control.default or not loss.when(value):
             continue
+        # {whole}: the frames a second a fractional rate's timecodes count (.csv)
         whole = math.ceil(value) if isinstance(value, int | float) and math.isfinite(value) else value
         lines.append(loss.says.format(flag=control.flag, value=_shown(value), file=path.name,
                                       head=head_path(path).name, whole=whole))
