@@ -21,7 +21,7 @@ from facegen.blinks import DEFAULT_RATE, check_blink_rate, check_seed
 from facegen.engines import ENGINES, check_ray, run_local, run_ray
 from facegen.errors import FacegenError
 from facegen.exchange import format_of, format_of_extension
-from facegen.runtime import cores
+from facegen.runtime import NOTES, Reporter, cores
 
 SAVE_EVERY = 5.0  # seconds between saves of the run state while items finish
 
@@ -63,7 +63,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
                  on_mismatch: str = "error", blink_rate: float = DEFAULT_RATE, seed: int = 0,
                  emotion: str | None = None, head_motion: float = 1.0, strength=None, language: str = "en",
-                 on_result: Callable[[JobResult], None] | None = None,
+                 reporter: Reporter = NOTES, on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
 
@@ -77,6 +77,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head); `strength`:
     every item's region scales (facegen.strength), where its row has no 'strength' of its own; `language`:
     every item's transcript language (facegen.languages), where its row has no 'language' of its own.
+    `reporter`'s notes say, once per run and before any item runs, each control asked for that an output
+    format cannot carry (facegen.exchange.controls: e.g. --fps 30 into .npy).
     `on_plan(total, to_run)` is called once the plan stands, `on_result` with every item's result (skipped
     ones first). User errors (a malformed manifest, a refused plan, bad
     options, an unreachable Ray cluster) are FacegenErrors raised before any item runs.
@@ -139,6 +141,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         options |= {"blinks": [blink_rate, seed]}
     if head_motion != 1.0:
         options |= {"head_motion": head_motion}
+    for line in dropped_controls(all_jobs, model_path):  # once per run, before any item runs
+        reporter.note(line)
     state = RunState.load(out)
     results: dict[int, JobResult] = {}
     keys: dict[int, str] = {}
@@ -207,6 +211,24 @@ def _model_hash(model: Path | None) -> str:
     except OSError as exc:
         raise FacegenError(f"cannot read the model bundle {path} ({exc.strerror}): pass the path of a "
                            ".safetensors bundle", param="model") from exc
+
+
+def dropped_controls(jobs: list[Job], model: Path | None) -> list[str]:
+    """The warnings of facegen.exchange.controls for every job's targets, each once (a batch's outputs are
+    called NAME in them); no head motion to carry when the model's face has no head pivot."""
+    from facegen.bundle import read_template
+    from facegen.exchange.controls import dropped
+    from facegen.head import has_pivot
+
+    turns = has_pivot(read_template(model).regions)  # the face alone: no torch
+    lines = []
+    for job in jobs:
+        asked = {"fps": job.fps, "head_motion": job.head_motion if turns else 0.0,
+                 "blink_rate": job.blink_rate, "seed": job.seed, "emotion": job.emotion,
+                 "strength": job.strength}
+        for target in job.targets:
+            lines += dropped(Path("NAME" + target.suffix), asked)
+    return list(dict.fromkeys(lines))
 
 
 def _check_rig(jobs: list[Job], model: Path | None) -> None:

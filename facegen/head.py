@@ -49,6 +49,7 @@ DRIFT_TAU_S = 1.2
 LIMIT_DEG = 8.0
 SMOOTH_S = 0.04
 PIVOT_BELOW_HINGE_CM, PIVOT_BEHIND_HINGE_CM = 3.0, 1.5
+DEFAULT_AMOUNT = 1.0  # `--head-motion` when not given: as people move theirs
 
 
 def check_amount(amount: float) -> float:
@@ -130,6 +131,12 @@ def head_motion(samples: np.ndarray, sample_rate: int, pauses: list[tuple[float,
         out = np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(3)], 1)
     out = LIMIT_DEG * np.tanh(amount * out / LIMIT_DEG)
     return out.astype(np.float32)
+
+
+def has_pivot(regions: dict) -> bool:
+    """True when a face with these regions has the jaw hinge its head turns about (`pivot`): without it the
+    head stays still."""
+    return "jaw_hinge" in regions
 
 
 def pivot(template: np.ndarray, regions: dict) -> np.ndarray:

@@ -59,9 +59,9 @@ def add_layers(clip, stream, fps: float):
     clip.parts = PartDrivers(gaze, tongue_curves(clip.phones, frames, fps))  # eyes, teeth, tongue
     if clip.saccades:
         stream = stream.with_turns(EyeTurns(clip.mesh.vertices, clip.mesh.regions, gaze))
-    if clip.head_motion and "jaw_hinge" in clip.mesh.regions:
-        from facegen.head import head_motion, pivot
+    from facegen.head import has_pivot, head_motion, pivot
 
+    if clip.head_motion and has_pivot(clip.mesh.regions):
         clip.head = head_motion(clip.samples, clip.sample_rate, pauses, frames, fps, clip.head_motion,
                                 clip.seed)
         clip.head_pivot = pivot(clip.mesh.vertices, clip.mesh.regions).astype(np.float32)

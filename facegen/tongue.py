@@ -1,7 +1,8 @@
 """The tongue's motion from the clip's phones: its tip rises to the ridge behind the upper teeth for t, d, n
 and l, and comes forward between the teeth for th (the "tipUp" and "tipForward" targets of the tongue in
-facegen.face.parts; tipForward is ARKit's tongueOut). Each phone's weight ramps in and out over about
-COARTICULATION_S (a raised-cosine window), as the tongue moves before and after the sound it makes."""
+facegen.face.parts; tipForward x arkit.solve.TONGUE_OUT is ARKit's tongueOut in every ARKit output). Each
+phone's weight ramps in and out over about COARTICULATION_S (a raised-cosine window), as the tongue moves
+before and after the sound it makes."""
 
 from __future__ import annotations
 

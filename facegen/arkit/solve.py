@@ -56,6 +56,9 @@ SOLVE_MARGIN = 300  # frames of context on either side of a block (the coupling 
 BLOCK_FRAMES = 256  # frames per block when reading an animation (bounds the memory of both passes)
 ERROR_FRAMES = 16  # frames per step of the error pass
 ERROR_FRAMES_MEASURED = 15000  # a longer clip's errors: on this many evenly spread frames (10 minutes)
+# ARKit tongueOut when the tongue's tip is fully forward (facegen.tongue's tipForward 1: a th, the tip between
+# the teeth); tongueOut 1 is the tongue stuck out past the lips, a th shows half as much
+TONGUE_OUT = 0.5
 
 
 @dataclass(frozen=True)
@@ -100,10 +103,22 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *,
             for start, block in anim.frame_blocks(BLOCK_FRAMES):
                 rhs[start : start + len(block)] = (block.reshape(len(block), -1) - rest) @ basis.T * scale
         weights = solve_weights(gram, rhs, smoothness, ridge=RIDGE).astype(np.float32)
+        set_tongue_out(weights, shapes.names, anim)
         every = -(-anim.num_frames // ERROR_FRAMES_MEASURED)
         lip_error, face_error = fit_errors(anim, _every(anim, every), basis, weights[::every],
                                            np.asarray(lips, np.int64))
     return Fit(tuple(shapes.names), weights, shapes, lip_error / shapes.mm, face_error / shapes.mm)
+
+
+def set_tongue_out(weights: np.ndarray, names: tuple[str, ...], anim: Animation) -> None:
+    """Set the tongueOut column of `weights` [T, K] (`names`) from the animation's tongue: TONGUE_OUT x its
+    tipForward weight (facegen.tongue, from the phones). The face has no tongue, so the fit cannot see it
+    (its tongueOut shape is the lower lip a tongue pushes out, which the solve leaves near 0); without
+    `anim.parts` (a file read back: no phones) the fit's value stays."""
+    if anim.parts is None or "tongueOut" not in names:
+        return
+    forward = np.asarray(anim.parts.tongue, np.float32)[:, 1]  # one row per frame (layers.py)
+    weights[:, names.index("tongueOut")] = np.clip(TONGUE_OUT * forward, 0.0, 1.0)
 
 
 def solve_weights(gram: np.ndarray, rhs: np.ndarray, smoothness: float = 0.0, *, ridge: float = 0.0,

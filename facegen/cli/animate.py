@@ -149,6 +149,14 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
         heard = " ".join(w["word"] + ("?" if w.get("confidence", 1.0) < SURE else "") for w in words)
         unsure_note = f" ({unsure} unsure words, marked ?, leave the brows neutral)" if unsure else ""
         reporter.note(f"heard: {heard or '(no words)'}{unsure_note}")
+    from facegen.exchange.controls import dropped
+    from facegen.runtime import warn_stderr
+
+    # a control asked for that the format cannot carry: one warning line each (no head made: none to carry)
+    asked = {"fps": fps, "head_motion": head_motion if anim.head is not None else 0.0,
+             "blink_rate": blink_rate, "seed": seed, "emotion": emotion, "strength": strength}
+    for line in dropped(output, asked):
+        warn_stderr(line)
     with Transaction():  # all or nothing: no animation without the preview asked for
         written = plan.write(anim)
         reporter.progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at "

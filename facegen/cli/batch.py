@@ -80,7 +80,7 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
                                batch_size=batch_size, default_ext=ext, fps=fps, usd_mode=usd_mode,
                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed,
                                emotion=emotion, head_motion=head_motion, strength=strength,
-                               language=language,
+                               language=language, reporter=reporter,
                                on_plan=planned,
                                on_result=lambda _r: bars and bars[0].update(1))
     finally:
