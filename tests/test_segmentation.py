@@ -122,3 +122,16 @@ def test_a_missing_segmenter_exits_2_with_one_line(chinese_wav):
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert "pip install 'facegen[scripts]'" in done.stderr
+
+
+def test_the_thai_caveat_still_holds():
+    """`facegen languages` warns that espeak-ng misreads Thai: when a new espeak-ng reads ดี as /d iː/ and แมว
+    as /m ɛː w/, this fails, and the caveat (facegen.languages.CAVEATS) should go."""
+    from facegen.espeak import phonemize
+
+    assert phonemize("ดี", "th") == ["d", "s"] and phonemize("แมว", "th")[0] == "a"
+    done = subprocess.run([sys.executable, "-m", "facegen", "languages", "--json"], capture_output=True,
+                          text=True, check=True)
+    rows = {r["code"]: r for r in json.loads(done.stdout)}
+    assert "misreads Thai" in rows["th"]["caveat"] and "caveat" not in rows["cmn"]
+    assert rows["cmn"]["measured"]["onset_median_ms"] < 40 and rows["ja"]["measured"]["refused"] >= 0.8
