@@ -26,6 +26,8 @@ def test_chinese_splits_into_its_words():
     assert [w for w, _ in spoken_words("我有3个苹果和iPhone，你呢？(笑)", "cmn")] == [
         "我", "有", "3", "个", "苹果", "和", "iPhone", "你", "呢"]
     assert [w for w, _ in spoken_words("早上好 大家", "yue")] == ["早上好", "大家"]
+    # full width: said as espeak-ng reads it
+    assert spoken_words("３个 ＡＢＣ", "cmn") == [("３", ["3"]), ("个", ["个"]), ("ＡＢＣ", ["abc"])]
 
 
 def test_japanese_splits_into_phrases_said_as_their_kana_reading():
