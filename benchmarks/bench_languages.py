@@ -15,7 +15,7 @@ between its words (and a Japanese word as its reading in kana: espeak-ng reads n
 times each word; the aligner is given the transcript as written. `--whole` aligns those transcripts without
 splitting them into words (as facegen did before), each word then timed by the start of the run it is in.
 
-    python benchmarks/bench_languages.py [--only fr de ...] [--whole]
+    python benchmarks/bench_languages.py [--only fr de ...] [--swaps 1-4] [--whole]
 """
 
 from __future__ import annotations
@@ -90,6 +90,8 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", nargs="*")
     parser.add_argument("--no-write", action="store_true", help="print only")
+    parser.add_argument("--swaps", type=int, default=1, choices=range(1, 5),
+                        help="each recording with the transcripts of this many other sentences (4: all)")
     parser.add_argument("--whole", action="store_true",
                         help="align transcripts in scripts without spaces unsplit (as before); print only")
     args = parser.parse_args()
@@ -115,25 +117,27 @@ def main() -> None:
                               "words": len(found.words),
                               "onset_errors_ms": [round(1000 * abs(s - t)) for s, t in
                                                   zip(starts, truth, strict=False)]})
-            other = sentences[(k + 1) % len(sentences)]
-            wrong = judged(audio, other, code, args.whole)
-            if isinstance(wrong, str):
-                refused += 1
-                cases.append({"language": code, "sentence": k, "kind": "swapped", "error": wrong})
-            else:
-                refused += wrong.match.problem is not None
-                gaps_wrong.append(wrong.match.word_gap)
-                cases.append({"language": code, "sentence": k, "kind": "swapped", **wrong.match.as_dict()})
+            for shift in range(1, args.swaps + 1):
+                other = sentences[(k + shift) % len(sentences)]
+                wrong = judged(audio, other, code, args.whole)
+                if isinstance(wrong, str):
+                    refused += 1
+                    cases.append({"language": code, "sentence": k, "kind": "swapped", "error": wrong})
+                else:
+                    refused += wrong.match.problem is not None
+                    gaps_wrong.append(wrong.match.word_gap)
+                    cases.append({"language": code, "sentence": k, "kind": "swapped",
+                                  **wrong.match.as_dict()})
         e = np.array(errors) if errors else np.array([np.nan])
         figures[code] = {"onset_median_ms": round(float(np.nanmedian(e)) * 1000, 1),
                          "within_100ms": round(float(np.mean(e < 0.1)), 3),
                          "accepted": round(accepted / len(sentences), 3),
-                         "refused": round(refused / len(sentences), 3),
+                         "refused": round(refused / (len(sentences) * args.swaps), 3),
                          "sentences": len(sentences), "seconds_per_line": round(float(np.median(seconds)), 2),
                          **({"held_out": True} if code in HELD_OUT else {})}
         print(f"{code:<4} onset median {figures[code]['onset_median_ms']:5.1f} ms, "
               f"{figures[code]['within_100ms']:.0%} within 100 ms, accepted {accepted}/{len(sentences)}, "
-              f"swapped refused {refused}/{len(sentences)}; word gap right "
+              f"swapped refused {refused}/{len(sentences) * args.swaps}; word gap right "
               f"{np.round(gaps_right, 1).tolist()} wrong {np.round(gaps_wrong, 1).tolist()}"
               f"{'  (held out)' if code in HELD_OUT else ''}", flush=True)
     if not (args.no_write or args.whole):  # each language's other figures (cross_language.py's lips) are kept
