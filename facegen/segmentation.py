@@ -65,20 +65,26 @@ def segment(chunk: str, language: str) -> list[tuple[str, str]]:
 _ATTACHED = ("助詞", "助動詞", "形容詞,非自立", "名詞,非自立", "名詞,接尾")
 
 
+_ASCII_DIGITS = {code: code - 0xFEE0 for code in range(0xFF10, 0xFF1A)}  # ０..９ → 0..9
+
+
 def _phrases(chunk: str) -> list[tuple[str, str]]:
     """A Japanese chunk's words: janome's morphemes, each attached morpheme (_ATTACHED) joined to the one
     before, so a word is a content word with its particles and endings (今日は, 働いて, います), said as
-    their readings."""
+    their readings. Full-width digits are read as ASCII ones: janome splits ２０２４ into digits said one by
+    one (ニ ゼロ ニ ヨン), espeak-ng says 2024 as a number; the words keep the spelling of `chunk`."""
     out: list[list[str]] = []
-    for m in _japanese().tokenize(chunk):
-        if not m.surface.strip():
+    at = 0
+    for m in _japanese().tokenize(chunk.translate(_ASCII_DIGITS)):
+        written, at = chunk[at:at + len(m.surface)], at + len(m.surface)
+        if not written.strip():
             continue
         said = _reading(m)
         if out and m.part_of_speech.startswith(_ATTACHED) and any(c.isalnum() for c in out[-1][0]):
-            out[-1][0] += m.surface
+            out[-1][0] += written
             out[-1][1] += said
         else:
-            out.append([m.surface, said])
+            out.append([written, said])
     return [(written, said) for written, said in out]
 
 

@@ -34,6 +34,8 @@ def test_japanese_splits_into_phrases_said_as_their_kana_reading():
     assert spoken_words(JAPANESE, "ja") == [
         ("兄は", ["アニワ"]), ("東京の", ["トーキョーノ"]), ("大きな", ["オーキナ"]),
         ("病院で", ["ビョーインデ"]), ("働いて", ["ハタライテ"]), ("います", ["イマス"])]
+    # numbers: said by espeak-ng's Japanese rules, full-width ones too, the words as written
+    assert spoken_words("２０２４年に3時", "ja") == [("２０２４年に", ["2024ネンニ"]), ("3時", ["3ジ"])]
 
 
 def test_thai_splits_into_its_words():
