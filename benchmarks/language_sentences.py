@@ -1,4 +1,4 @@
-"""Five everyday sentences in each of 25 languages (written for facegen's language benchmark; no source text),
+"""Five everyday sentences in each of 28 languages (written for facegen's language benchmark; no source text),
 and the languages held out of training (facegen.languages.HELD_OUT) marked there."""
 
 SENTENCES = {
@@ -127,4 +127,19 @@ SENTENCES = {
            "Kesho asubuhi tutasafiri kwa treni kwenda Mombasa.",
            "Paka analala kwenye kochi sebuleni.",
            "Unaweza kufunga dirisha, tafadhali?"],
+    "cmn": ["早上好，很高兴今天在这里见到大家。",
+            "我哥哥在北京的一家大医院工作。",
+            "明天上午我们坐火车去上海。",
+            "小猫在客厅的沙发上睡觉。",
+            "你能帮我把窗户关上吗？"],
+    "ja": ["おはようございます。今日は皆さんに会えてとても嬉しいです。",
+           "兄は東京の大きな病院で働いています。",
+           "明日の朝、電車で大阪に行きます。",
+           "猫は居間のソファーで寝ています。",
+           "窓を閉めてもらえますか？"],
+    "th": ["สวัสดีตอนเช้า วันนี้ฉันดีใจมากที่ได้พบทุกคน",
+           "พี่ชายของฉันทำงานที่โรงพยาบาลใหญ่ในกรุงเทพ",
+           "พรุ่งนี้เช้าเราจะนั่งรถไฟไปเชียงใหม่",
+           "แมวนอนหลับอยู่บนโซฟาในห้องนั่งเล่น",
+           "ช่วยปิดหน้าต่างให้หน่อยได้ไหม"],
 }

@@ -324,7 +324,10 @@ def _piece_states(decoder, pcm: bytes, kept: list[tuple[str, int, int]], length:
             pcm = pcm[:length * HOP * 2]
             decoder.set_align_text(" ".join(w for w, _, _ in kept))
             decode(decoder, pcm, cmn)
-    return state_pass(decoder, pcm, cmn)
+    try:
+        return state_pass(decoder, pcm, cmn)
+    except RuntimeError:  # its words do not fit the frames (seen: a 9-syllable Thai word over another line)
+        raise mismatch("pocketsphinx found no phone alignment for its words") from None
 
 
 def word_phones(alignment, skip: int, count: int, first: int, duration: float) -> list[list[Phone]]:

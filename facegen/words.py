@@ -276,14 +276,29 @@ def _said_as_digits(before: str, word: str) -> bool:
             and before.lower().rstrip(".#:") in DIGIT_KEYS)
 
 
+_FULL_WIDTH = {code: code - 0xFEE0 for code in range(0xFF01, 0xFF5F)}  # ！..～ → !..~
+
+
 def spoken_words(text: str, language: str = "en") -> list[tuple[str, list[str]]]:
     """`normalize_transcript` for English; in another language (a code of facegen.languages) each word with
-    itself as its one token, lower case: espeak-ng says its numbers and abbreviations in that language's
-    rules (words made only of punctuation and stage directions left out)."""
+    what espeak-ng is given to say it as its one token, lower case: espeak-ng says its numbers and
+    abbreviations in that language's rules (words made only of punctuation and stage directions left out).
+    Text in a script written without spaces (Chinese, Japanese, Thai) is split into its words
+    (facegen.segmentation); a Japanese word is said as its reading in kana. Full-width digits and letters
+    (３, ＯＫ, common in those scripts) are said as the ones espeak-ng reads (it says nothing for a full-width
+    digit in Chinese)."""
+    from facegen.segmentation import segment, unspaced
+
     if language == "en":
         return normalize_transcript(text)
-    words = [strip_edges(raw) for raw in split_directions(text)[0].split()]
-    return [(w, [w.lower()]) for w in words if any(c.isalnum() for c in w)]
+    out = []
+    for raw in split_directions(text)[0].split():
+        word = strip_edges(raw)
+        for written, said in segment(word, language) if unspaced(word, language) else [(word, word)]:
+            written = strip_edges(written)
+            if any(c.isalnum() for c in written):
+                out.append((written, [said.translate(_FULL_WIDTH).lower()]))
+    return out
 
 
 def check_word_rate(words: int, duration: float, what: str) -> None:

@@ -14,13 +14,14 @@ from facegen.cli.command import Command
 def languages(as_json):
     """List the languages of --language: code, family, script and, where measured, how well the words align
     (word-onset error) and how the mismatch check does (benchmarks/bench_languages.py)."""
-    from facegen.languages import figures
+    from facegen.languages import CAVEATS, figures
     from facegen.languages import languages as table
 
     measured = figures()
     rows = [{"code": lang.code, "family": lang.family_name, "script": "/".join(lang.scripts).title(),
              **({"held_out": True} if measured.get(lang.code, {}).get("held_out") else {}),
-             "measured": measured.get(lang.code)} for lang in table().values()]
+             "measured": measured.get(lang.code),
+             **({"caveat": CAVEATS[lang.code]} if lang.code in CAVEATS else {})} for lang in table().values()]
     rows.sort(key=lambda r: (r["measured"] is None, r["code"]))
     if as_json:
         click.echo(json.dumps(rows, indent=1, ensure_ascii=False))
@@ -29,6 +30,7 @@ def languages(as_json):
     for r in rows:
         m = r["measured"]
         said = "not measured" if m is None else "; ".join(_figures(m))
+        said += f" (caveat: {r['caveat']})" if "caveat" in r else ""
         click.echo(f"{r['code']:<16} {r['family']:<22} {r['script']:<20} {said}")
 
 
