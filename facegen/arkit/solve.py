@@ -229,4 +229,5 @@ def fit_errors(anim: Animation, blocks: Iterable[tuple[int, np.ndarray]], basis:
             dist = np.sqrt(np.einsum("tvc,tvc->tv", residual, residual))
             lip_sum += float(dist[:, lips].sum(dtype=np.float64))
             face_sum += float(dist.sum(dtype=np.float64))
+        block = frames = None  # released before the next block is made: one block of frames alive, not two
     return lip_sum / (max(count, 1) * len(lips)), face_sum / (max(count, 1) * anim.num_vertices)

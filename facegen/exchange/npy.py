@@ -37,7 +37,9 @@ def write(
     with atomic_with_sidecar(path, audio, anim.sample_rate, audio_source) as (tmp, wav), open(tmp, "wb") as f:
         shape = (anim.num_frames, 3 * anim.num_vertices)  # the header np.save writes, then the frames
         np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": shape})
-        f.writelines(np.ascontiguousarray(block, dtype="<f4").data for _, block in anim.frame_blocks())
+        for _, block in anim.frame_blocks():
+            f.write(np.ascontiguousarray(block, dtype="<f4").data)
+            del block  # before the next block is made: one block of frames alive, not two
         if anim.head is not None:  # beside it, so the research layout stays [T, 3V]
             with Transaction() as transaction, open(transaction.file(head_path(path)), "wb") as h:
                 np.save(h, np.asarray(anim.head, "<f4"))
