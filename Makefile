@@ -12,7 +12,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e '.[test,ray,scripts]'
+	$(BIN)/pip install -q -e '.[test,ray,scripts,corpus]'
 	touch $(STAMP)
 
 demo: $(STAMP)

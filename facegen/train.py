@@ -293,6 +293,7 @@ def train(
         "train": [it.name for it in data.train], "val": [it.name for it in data.val], "output": config.output,
         "lip_weight": config.lip_weight, "velocity_weight": config.velocity_weight,
         **({"upper_weight": config.upper_weight} if config.upper_weight else {}),
+        **({"init": str(config.init)} if config.init else {}),
     }
     with torch_settings(threads):
         run = _Run(config, cfg, data, basis, dev, ckpt_dir, reporter)
@@ -357,10 +358,15 @@ class _Run:
         model = FaceModel(cfg)
         if basis is not None:
             model.set_basis(torch.from_numpy(basis.pca), torch.from_numpy(basis.mean))
-        mels = np.concatenate([it.mel for it in data.train]).astype(np.float64)
-        with torch.no_grad():
-            model.mel_mean.copy_(torch.from_numpy(mels.mean(0)).float())
-            model.mel_std.copy_(torch.from_numpy(mels.std(0)).float().clamp(min=MIN_MEL_STD))
+        if config.init:  # fine-tuning: its weights and mel normalisation
+            from facegen.train_init import warm_start
+
+            warm_start(model, config.init, data.features)
+        else:
+            mels = np.concatenate([it.mel for it in data.train]).astype(np.float64)
+            with torch.no_grad():
+                model.mel_mean.copy_(torch.from_numpy(mels.mean(0)).float())
+                model.mel_std.copy_(torch.from_numpy(mels.std(0)).float().clamp(min=MIN_MEL_STD))
         self.model = model.to(dev).train()
         self.optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, fused=dev.type in ("cpu", "cuda"))
         self.best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}

@@ -37,7 +37,8 @@ class TrainConfig:
     `upper_weight` and `velocity_weight` add lip-vertex, upper-face and frame-to-frame terms to the loss
     (0: the paper's MSE). `patience` stops after that many epochs without a better validation loss (None:
     every epoch runs). `phones` adds the phone stream (per-frame phones from the dataset's alignment JSON)
-    to the audio encoder.
+    to the audio encoder. `init` is a bundle whose weights the run starts from (fine-tuning:
+    facegen.train_init), None: a random initialisation.
     """
 
     text_backend: str = "minilm"
@@ -58,6 +59,7 @@ class TrainConfig:
     upper_weight: float = 0.0
     patience: int | None = None
     phones: bool = False
+    init: str | None = None
 
     def check(self) -> None:
         """Raise FacegenError for a setting no run can use (before any data is read)."""
@@ -110,4 +112,6 @@ class TrainConfig:
             out["patience"] = self.patience
         if self.phones:
             out["phones"] = "per-frame CMU phones"
+        if self.init:
+            out["init"] = run.get("init", self.init)
         return out

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from helpers import TOY_SPLITS, make_dataset, train_toy
+from helpers import SMALL, TOY_SPLITS, make_dataset, train_toy
 from safetensors import safe_open
 
 from facegen.bundle import load_bundle, read_metadata
@@ -202,3 +202,37 @@ def test_the_bundle_records_its_config_and_features(toy, tmp_path):
     assert resumed.epochs_run == 1 and resumed.epochs == 2
     with pytest.raises(FacegenError, match="unknown precision"):
         train_toy(toy, tmp_path / "p.safetensors", precision="fp8")
+
+
+def test_init_starts_from_a_bundle_and_refuses_another_network(toy, tmp_path):
+    """Fine-tuning (--init): the run starts where the bundle is — before a step its predictions are the
+    bundle's (full layer as is, a PCA layer projected into the new basis) — and a bundle of another network
+    is refused in one line."""
+    from facegen.model import one_hot
+    from facegen.train_init import warm_start
+
+    first = tmp_path / "first.safetensors"
+    train_toy(toy, first, epochs=3, output="pca", basis=6)
+    mel = torch.randn(1, 60, 128) * 10 - 50
+    bundle = load_bundle(first)
+    with torch.no_grad():
+        want = bundle.model(mel, None, one_hot(0, 2))
+    # a 1e-12 learning rate: the fine-tuned model is still the bundle (the basis refitted on the same data)
+    again = tmp_path / "again.safetensors"
+    train_toy(toy, again, epochs=1, lr=1e-12, output="pca", basis=6, init=str(first))
+    tuned = load_bundle(again)
+    with torch.no_grad():
+        got = tuned.model(mel, None, one_hot(0, 2))
+    assert torch.allclose(got, want, atol=1e-5 * float(want.abs().max()))
+    assert tuned.provenance["init"] == str(first)
+    assert torch.equal(tuned.model.mel_mean, bundle.model.mel_mean)  # the bundle's normalisation is kept
+    # a full output layer takes the weights as they are
+    from facegen.model import FaceModel
+
+    model = FaceModel(bundle.config)
+    warm_start(model, str(first), bundle.features)
+    assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(),
+                                                 bundle.model.state_dict().values(), strict=True))
+    with pytest.raises(FacegenError, match="another network than this run's .*lstm_dim"):
+        train_toy(toy, tmp_path / "other.safetensors", init=str(first),
+                  model_options={**SMALL, "lstm_dim": 4})

@@ -14,7 +14,7 @@ from facegen.errors import FacegenError
 from facegen.lipsync import FaceGeometry, aperture, bilabial_midpoints
 from facegen.runtime import SILENT
 from facegen.synth import voice_corpus as vc
-from facegen.synth.voices import available_voices
+from facegen.synth.voices import CORPUS_LANGUAGES, available_voices
 
 
 def _engines() -> set[str]:
@@ -26,8 +26,11 @@ def corpus(tmp_path_factory):
     if not {"espeak", "flite", "festival"} <= _engines():
         pytest.skip("the voices corpus needs espeak-ng, Flite and Festival (make voices)")
     out = tmp_path_factory.mktemp("voices")
-    manifest = vc.build(out, limit=1, workers=1)
+    manifest = vc.build(out, limit=1, workers=1, languages=LANGUAGES)
     return out, manifest
+
+
+LANGUAGES = ("fr", "ru")
 
 
 def test_plan_draws_voices_apart_from_styles_and_holds_out_flite():
@@ -49,7 +52,8 @@ def test_sequences_are_complete_and_consistent(corpus):
     out, manifest = corpus
     done = manifest["done"]
     assert {e["split"] for e in done.values()} == {"train", "val", "test", "test-unseen", "test-xvoice",
-                                                    "test-unseen-xvoice"}
+                                                    "test-unseen-xvoice", "train-fr", "val-fr", "test-fr",
+                                                    "train-ru", "val-ru", "test-ru"}
     assert not [e for e in done.values() if "error" in e]
     for name, entry in done.items():
         audio, rate = load_audio(out / "wav" / f"{name}.wav")
@@ -89,10 +93,12 @@ def test_the_reader_poses_the_curves_and_bilabials_close_the_lips(corpus):
 
 def test_rerun_resumes_and_other_parameters_are_refused(corpus):
     out, manifest = corpus
-    again = vc.build(out, limit=1, workers=1)
+    again = vc.build(out, limit=1, workers=1, languages=LANGUAGES)
     assert again["done"] == manifest["done"]
     with pytest.raises(FacegenError, match="other parameters"):
-        vc.build(out, limit=2, workers=1)
+        vc.build(out, limit=2, workers=1, languages=LANGUAGES)
+    with pytest.raises(FacegenError, match="other parameters"):
+        vc.build(out, limit=1, workers=1, languages=("fr",))
 
 
 def test_missing_voices_name_the_packages(monkeypatch, tmp_path):
@@ -143,3 +149,56 @@ def test_phone_stream_trains_and_animates_from_the_transcripts_phones(corpus, tm
     audio_only = animate(wav, no_text=True, bundle=bundle, speaker=0)  # phones of the recognised words
     assert audio_only.metadata["word_timing"] == "none (--no-text)"
     assert audio_only.vertices.shape == anim.vertices.shape and np.isfinite(audio_only.vertices).all()
+
+
+def test_other_languages_are_planned_apart_and_never_the_held_out_ones():
+    """20 languages of 9 families, 60 sentences each in three sentence ranges (one per split), each said by
+    one of the language's espeak-ng voices; nl, pl and tr never."""
+    if "espeak" not in _engines():
+        pytest.skip("needs espeak-ng")
+    from facegen.languages import HELD_OUT, check_language
+
+    takes = vc.foreign_takes(CORPUS_LANGUAGES)
+    assert len(takes) == 20 * vc.PER_LANGUAGE and not set(HELD_OUT) & set(CORPUS_LANGUAGES)
+    assert len({check_language(c).family for c in CORPUS_LANGUAGES}) >= 9
+    for split, first in vc.FOREIGN_FIRST.items():
+        numbers = [t.sentence for t in takes if t.split.startswith(split + "-")]
+        assert min(numbers) >= first and max(numbers) < first + 10000
+    assert len({t.sentence for t in takes}) == len(takes)
+    assert {t.split for t in takes if t.voice.startswith("espeak:ru+")} == {"train-ru", "val-ru", "test-ru"}
+    assert sum(t.split == "train-fr" for t in takes) == 48 and sum(t.split == "val-fr" for t in takes) == 6
+    assert vc.foreign_takes(CORPUS_LANGUAGES) == takes  # deterministic
+    with pytest.raises(FacegenError, match="no voices for 'nl'"):
+        vc.foreign_takes(("nl",))
+
+
+def test_foreign_sentences_are_words_of_their_language():
+    pytest.importorskip("wordfreq")
+    from facegen.languages import check_language, script_of
+    from facegen.synth.foreign_sentences import WORDS, foreign_sentences
+
+    for code in ("fr", "ru", "el", "hi", "vi"):
+        sentences = foreign_sentences(code, 40)
+        assert foreign_sentences(code, 40) == sentences and len(set(sentences)) == 40
+        scripts = set(check_language(code).scripts)
+        for sentence in sentences:
+            words = sentence.rstrip(".?").replace(",", "").split()
+            assert WORDS[0] <= len(words) <= WORDS[1]
+            assert all(script_of(c) in scripts for w in words for c in w if c.isalpha())
+            assert not any(c.isdigit() for c in sentence)
+            assert not [w for w in words if len(w) == 1 and w.lower() in "bcdfghjklmnpqrstvwxz"]
+    assert any("ς" in s for s in foreign_sentences("el", 40))  # final sigma restored
+
+
+def test_foreign_phones_are_labelled_from_the_ipa():
+    """A French /y/ is a rounded UW, a Spanish or Russian b/m a bilabial, in the synthesiser's time."""
+    if "espeak" not in _engines():
+        pytest.skip("needs espeak-ng")
+    from facegen.synth.voices import synthesize
+
+    utt = synthesize("Tu bois du jus.", "espeak:fr+m1")
+    assert utt.alphabet == "cmu" and [p for p, _, _ in utt.phones][:4] == ["T", "UW", "B", "W"]
+    assert all(b > a for _, a, b in utt.phones) and utt.phones[-1][2] <= utt.duration + 0.01
+    assert all(b1 <= a2 + 1e-6 for (_, _, b1), (_, a2, _) in zip(utt.phones, utt.phones[1:]))
+    ru = synthesize("Мама мыла раму.", "espeak:ru+f2")
+    assert [p for p, _, _ in ru.phones].count("M") == 4

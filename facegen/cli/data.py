@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import click
 
 from facegen.cli.command import Command
@@ -45,11 +47,14 @@ def import_biwi(raw, out, transcripts, regions, subjects, quiet):
                    "sentences; Flite held out).")
 @click.option("--limit", type=click.IntRange(min=1),
               help="voices: only this many sequences per split (a trial).")
+@click.option("--languages",
+              help="voices: the other languages besides English, e.g. fr,de,ru, or none (default: the 20 it "
+                   "has voices for; nl, pl and tr are never among them: held out).")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--fps", type=FPS, default=25.0, show_default=True)
 @click.option("--workers", type=click.IntRange(1, 256), default=2, show_default=True)
 @click.option("--quiet", "-q", is_flag=True)
-def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
+def synth(out, subjects, sentences, preset, limit, languages, seed, fps, workers, quiet):
     """Generate a synthetic speech-and-motion corpus in OUT (BIWI layout)."""
     reporter = Reporter.stderr(quiet)
     if preset == "voices":
@@ -60,13 +65,15 @@ def synth(out, subjects, sentences, preset, limit, seed, fps, workers, quiet):
             raise FacegenError("--subjects, --sentences and --fps do not apply to --preset voices: drop them")
         if workers < 1:
             raise FacegenError(f"--workers {workers} must be at least 1")
-        manifest = build(out, seed=seed, workers=workers, limit=limit, reporter=reporter)
+        chosen = None if languages is None else tuple(c for c in re.split(r"[,\s]+", languages.strip())
+                                                      if c and c.lower() != "none")
+        manifest = build(out, seed=seed, workers=workers, limit=limit, languages=chosen, reporter=reporter)
         failed = sum("error" in e for e in manifest["done"].values())
         click.echo(f"{len(manifest['done']) - failed} sequences in {out}"
                    + (f" ({failed} failed)" if failed else ""))
         return
-    if limit is not None:
-        raise FacegenError("--limit applies to --preset voices only: drop it")
+    if limit is not None or languages is not None:
+        raise FacegenError("--limit and --languages apply to --preset voices only: drop them")
     from facegen.synth.corpus import synthesize_corpus
 
     report = synthesize_corpus(out, subjects, sentences, preset=preset, fps=fps, seed=seed, workers=workers,

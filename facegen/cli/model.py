@@ -86,12 +86,14 @@ def info(bundle, as_json):
 @click.option("--patience", type=click.IntRange(min=1),
               help="Stop after this many epochs without a better validation loss.")
 @click.option("--phones", is_flag=True, help="Add the phone stream (per-frame phones) to the audio encoder.")
+@click.option("--init", type=click.Path(dir_okay=False, exists=True),
+              help="Start from this bundle's weights (fine-tuning; the same network and features).")
 @split_options
 @click.option("--quiet", "-q", is_flag=True)
 def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device,
           resume, checkpoint_dir, precision, threads, strict, output_layer, basis, lip_weight,
-          velocity_weight, upper_weight, patience, phones, train_subjects, test_subjects, train_sentences,
-          val_sentences, test_sentences, quiet):
+          velocity_weight, upper_weight, patience, phones, init, train_subjects, test_subjects,
+          train_sentences, val_sentences, test_sentences, quiet):
     """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
     import os
 
@@ -103,7 +105,7 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
                          lr=lr, batch_size=batch_size, seed=seed, splits=chosen, precision=precision,
                          output=output_layer, basis=basis, lip_weight=lip_weight,
                          velocity_weight=velocity_weight, upper_weight=upper_weight, patience=patience,
-                         phones=phones)
+                         phones=phones, init=init)
     result = run(data, output, config, device=device, threads=threads, resume=resume,
                  checkpoint_dir=checkpoint_dir, text_model_path=text_model,
                  on_bad="fail" if strict else "skip", reporter=Reporter.stderr(quiet))

@@ -38,14 +38,20 @@ from facegen.atomic import atomic_path
 from facegen.errors import FacegenError
 from facegen.processes import process_pool
 from facegen.runtime import SILENT, Reporter, set_threads
+from facegen.synth.voices import CORPUS_LANGUAGES, FOREIGN_VARIANTS
 
-VERSION = 1
+VERSION = 2  # 2: the other languages
 MANIFEST = "voices.json"
 RATE = 16000  # Hz of the stored audio (the model's)
 FPS = 25.0
 STYLES = ("F2", "F3", "F4", "M3", "M4", "M5")  # the motion styles: facegen.synth.corpus speakers
 XVOICE_OFFSET = 10000  # sentence number of the held-out synthesiser's take of test sentence N: N + this
-TRAIN_VOICES = ("espeak:*", "festival:kal_diphone", "festival:ked_diphone")
+# The other languages (facegen.synth.voices.CORPUS_LANGUAGES): PER_LANGUAGE sentences each
+# (facegen.synth.foreign_sentences), train/val/test 80/10/10, numbered FOREIGN_FIRST[split] + 100 x the
+# language's place + k, so each split is one range (train 20000-29999, val 30000-39999, test 40000-49999)
+PER_LANGUAGE = 60
+FOREIGN_FIRST = {"train": 20000, "val": 30000, "test": 40000}
+TRAIN_VOICES = ("espeak:en*", "festival:kal_diphone", "festival:ked_diphone")
 TEST_VOICES = ("flite:slt", "flite:rms", "flite:awb")
 RATES = (0.85, 1.2)  # speaking rate, relative to each voice's own
 MEAN_SECONDS = 4.4  # for the disk estimate
@@ -82,8 +88,10 @@ def _voices(patterns: tuple[str, ...]) -> list[str]:
 
 
 def plan(sentences: int = 2400, seed: int = 0, train_voices: tuple[str, ...] = TRAIN_VOICES,
-         test_voices: tuple[str, ...] = TEST_VOICES) -> list[Take]:
-    """Every take of the corpus, in a fixed order (a function of the arguments only)."""
+         test_voices: tuple[str, ...] = TEST_VOICES, languages: tuple[str, ...] | None = None,
+         per_language: int = PER_LANGUAGE) -> list[Take]:
+    """Every take of the corpus, in a fixed order (a function of the arguments only): the English takes, then
+    `per_language` takes in each of `languages` (None: CORPUS_LANGUAGES)."""
     from facegen.datasets.splits import sequence_name
     from facegen.synth.sentences import generated_sentences, generated_splits
 
@@ -103,6 +111,32 @@ def plan(sentences: int = 2400, seed: int = 0, train_voices: tuple[str, ...] = T
                 xvoice = test[int(rng.integers(len(test)))]
                 takes.append(Take(sequence_name(subject, m), subject, m, texts[n], xvoice, rate, m,
                                   f"{split}-xvoice"))
+    return takes + foreign_takes(CORPUS_LANGUAGES if languages is None else languages, per_language, seed)
+
+
+def foreign_takes(languages: tuple[str, ...], per_language: int = PER_LANGUAGE, seed: int = 0) -> list[Take]:
+    """The takes of the other languages: each sentence said by one of the language's espeak-ng voices
+    (FOREIGN_VARIANTS), moved by a style drawn independently."""
+    from facegen.datasets.splits import sequence_name
+    from facegen.synth.foreign_sentences import foreign_sentences
+
+    takes = []
+    val = test = max(1, per_language // 10) if per_language >= 3 else 0
+    counts = {"train": per_language - val - test, "val": val, "test": test}
+    for i, code in enumerate(languages):
+        if code not in CORPUS_LANGUAGES:
+            raise FacegenError(f"the voices corpus has no voices for {code!r}: choose among "
+                               f"{', '.join(CORPUS_LANGUAGES)}")
+        texts = iter(foreign_sentences(code, per_language, seed))
+        rng = np.random.default_rng([seed, 11, i])
+        for split, count in counts.items():
+            for k in range(count):
+                n = FOREIGN_FIRST[split] + 100 * CORPUS_LANGUAGES.index(code) + k
+                subject = STYLES[int(rng.integers(len(STYLES)))]
+                variant = list(FOREIGN_VARIANTS)[int(rng.integers(len(FOREIGN_VARIANTS)))]
+                rate = float(rng.uniform(*RATES))
+                takes.append(Take(sequence_name(subject, n), subject, n, next(texts),
+                                  f"espeak:{code}+{variant}", rate, n, f"{split}-{code}"))
     return takes
 
 
@@ -193,14 +227,15 @@ def _write_root(out: Path, takes: list[Take]) -> None:
 
 
 def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, workers: int = 2,
-          augmentation: bool = True, limit: int | None = None,
-          reporter: Reporter = SILENT) -> dict:
+          augmentation: bool = True, limit: int | None = None, languages: tuple[str, ...] | None = None,
+          per_language: int = PER_LANGUAGE, reporter: Reporter = SILENT) -> dict:
     """Make (or resume) the corpus in `out`; returns the manifest. `limit` makes only the first takes of each
     split (a small corpus for tests and trials). How far it is goes to `reporter.progress`."""
     import shutil
 
     out = Path(out)
-    takes = plan(sentences, seed)
+    languages = CORPUS_LANGUAGES if languages is None else tuple(languages)
+    takes = plan(sentences, seed, languages=languages, per_language=per_language)
     if limit is not None:  # the first `limit` takes of each split
         kept, counts = [], {}
         for t in takes:
@@ -209,7 +244,8 @@ def build(out: str | os.PathLike, *, sentences: int = 2400, seed: int = 0, worke
                 kept.append(t)
         takes = kept
     params = {"version": VERSION, "sentences": sentences, "seed": seed, "augmentation": augmentation,
-              "limit": limit, "fps": FPS, "sample_rate": RATE}
+              "limit": limit, "fps": FPS, "sample_rate": RATE, "languages": list(languages),
+              "per_language": per_language}
     out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / MANIFEST
     manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {"params": params,

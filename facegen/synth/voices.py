@@ -1,7 +1,8 @@
 """Speech synthesisers behind one voice registry: libespeak-ng (in-process, facegen.espeak), Flite and
 Festival (Debian packages) voices with stable names ("espeak:en-us+f3", "flite:slt", "festival:kal_diphone"),
 each synthesised to an `Utterance` with the engine's own phone and word timings (CMU phones; espeak's own
-mnemonics for espeak voices, which the rig reads natively — `Utterance.alphabet` says which).
+mnemonics for English espeak voices, which the rig reads natively; other languages' phones labelled from
+espeak-ng's IPA as CMU phones — `Utterance.alphabet` says which).
 
 An engine is one `Engine` subclass (its binary, the Debian packages that install it, its voices and one
 `_synthesize`); adding one (e.g. espeak-ng variants) is one class plus one entry in `ENGINES`. Every engine
@@ -26,6 +27,13 @@ from facegen.phonetics import RADIO_TO_CMU, is_pause
 from facegen.processes import run_tool, tool_path
 
 Timing = tuple[str, float, float]
+# the languages the voices corpus speaks besides English (facegen.synth.voice_corpus): 20 languages of 9
+# families with word lists in wordfreq (facegen.synth.foreign_sentences); never facegen.languages.HELD_OUT
+CORPUS_LANGUAGES = ("fr", "es", "pt", "it", "ro", "ca", "de", "sv", "da", "nb", "ru", "uk", "cs", "bg", "el",
+                    "fi", "hu", "id", "hi", "vi")
+# their voice variants: (gender, pitch 0-100, words per minute)
+FOREIGN_VARIANTS = {"m1": ("male", 45, 160), "f2": ("female", 55, 150), "m3": ("male", 50, 165),
+                    "f3": ("female", 60, 155), "m4": ("male", 40, 150), "f4": ("female", 50, 160)}
 
 
 @dataclass(frozen=True)
@@ -267,7 +275,8 @@ def _festival_voice_list(exe: str) -> set[str]:
 
 class Espeak(Engine):
     """libespeak-ng in-process (facegen.espeak): English languages x voice variants, each with its own pitch
-    and speaking rate, so the voices differ in timbre, accent, pitch and tempo."""
+    and speaking rate, so the voices differ in timbre, accent, pitch and tempo; and the other languages of
+    the voices corpus (facegen.synth.voice_corpus.LANGUAGES) x FOREIGN_VARIANTS ("espeak:fr+m3")."""
 
     name, binary, install = "espeak", "", "pip install espeakng-loader"
     # (language+variant, gender, pitch 0-100, words per minute)
@@ -280,6 +289,8 @@ class Espeak(Engine):
         "en-gb-x-rp+m4": ("male", 40, 146), "en-us+m6": ("male", 60, 158), "en-gb-scotland+m7": ("male", 50,
                                                                                                  154),
         "en-us+klatt": ("male", 50, 160), "en+whisper": ("female", 50, 150),
+        **{f"{code}+{variant}": setting for code in CORPUS_LANGUAGES
+           for variant, setting in FOREIGN_VARIANTS.items()},
     }
     voices = tuple(Voice("espeak", k, g, "espeakng-loader (PyPI)", f"espeak-ng {k}, pitch {p}, {r} wpm")
                    for k, (g, p, r) in _SETTINGS.items())
@@ -296,9 +307,42 @@ class Espeak(Engine):
 
         _, pitch, wpm = self._SETTINGS[voice.id]
         speech = synthesize(text, voice.id, pitch=pitch, rate=round(min(max(wpm * rate, 80), 450)))
-        phones = [(p.text, p.start, p.end) for p in speech.phones if not p.text.startswith("_")]
         words = [(w.text, w.start, w.end) for w in speech.words]
+        language = voice.id.split("+")[0]
+        if not language.startswith("en"):  # espeak's mnemonics differ per language: CMU phones from the IPA
+            return Utterance(speech.audio, speech.sample_rate, ipa_phone_times(speech, language), words,
+                             voice.name, alphabet="cmu")
+        phones = [(p.text, p.start, p.end) for p in speech.phones if not p.text.startswith("_")]
         return Utterance(speech.audio, speech.sample_rate, phones, words, voice.name, alphabet="espeak")
+
+
+def ipa_phone_times(speech, language: str) -> list[Timing]:
+    """The phones libespeak-ng spoke in `speech` (facegen.espeak.Speech) as CMU phones with their times,
+    labelled from espeak-ng's IPA of each word in `language` (facegen.phonetics.ipa_to_cmu: articulatory
+    features, so a French /y/ is a rounded UW). Where the synthesiser spoke as many phones as the IPA lists,
+    each keeps its own time (split evenly where one IPA phone maps to several); otherwise the word's phones
+    share its time, vowels twice a consonant's share."""
+    from facegen.espeak import phonemize
+    from facegen.phonetics import CMU_VOWELS, ipa_to_cmu, is_silence
+
+    out: list[Timing] = []
+    for k, word in enumerate(speech.words):
+        ipa = phonemize(word.text, language, ipa=True)
+        own = [p for p in speech.phones if p.word == k and not is_silence(p.text)]
+        if own and len(own) == len(ipa):
+            for segment, p in zip(ipa, own, strict=True):
+                parts = ipa_to_cmu([segment])
+                edges = np.linspace(p.start, p.end, len(parts) + 1)
+                out += [(c, float(edges[i]), float(edges[i + 1])) for i, c in enumerate(parts)]
+            continue
+        cmu = ipa_to_cmu(ipa)
+        if not cmu:
+            continue
+        weights = np.array([2.0 if c in CMU_VOWELS else 1.0 for c in cmu])
+        shares = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
+        edges = word.start + (word.end - word.start) * shares
+        out += [(c, float(edges[i]), float(edges[i + 1])) for i, c in enumerate(cmu)]
+    return out
 
 
 ENGINES: dict[str, Engine] = {e.name: e for e in (Espeak(), Flite(), Festival())}
