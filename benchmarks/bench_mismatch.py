@@ -2,7 +2,10 @@
 
 The recorded library is Asterisk's English prompts (a professional voice, 8 kHz telephone band, ~550 lines of
 0.4-73 s with their recording script; Debian: `apt-get install asterisk-core-sounds-en-wav`), read with its
-script file as a user's CI would: every line animates with its script or is refused. Cases per line:
+script file as a user's CI would: every line animates with its script or is refused. `--language fr|es|it|ru`
+reads Asterisk's Canadian French, Mexican Spanish, Italian or Russian prompts instead (`apt-get install
+asterisk-core-sounds-fr-wav asterisk-core-sounds-fr`, and so on; recorded speech kept for the independent
+check of issue 25: never tuned on) and aligns them with `--language`. Cases per line:
 
 - correct: the line with its own script (stage directions such as "[beep]" or "(note: ...)" included, as
   scripts carry them); a script that is only a direction is counted apart (no words to align);
@@ -15,7 +18,8 @@ and the writer do not change the outcome) and records accepted/refused with the 
 scores. `--half odd` (the default) uses the lines at odd positions of the sorted list for development; `even`
 is kept for the held-out figure; `all` both.
 
-    python benchmarks/bench_mismatch.py [--half odd|even|all] [--limit N] [--json out.json]
+    python benchmarks/bench_mismatch.py [--language en|fr|es|it|ru] [--half odd|even|all] [--limit N]
+                                        [--json out.json]
 """
 
 from __future__ import annotations
@@ -29,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-SOUNDS = Path("/usr/share/asterisk/sounds/en")
-SCRIPT = Path("/usr/share/doc/asterisk-core-sounds-en/core-sounds-en.txt.gz")
+SOUNDS = Path("/usr/share/asterisk/sounds/{}")
+SCRIPT = Path("/usr/share/doc/asterisk-core-sounds-{0}/core-sounds-{0}.txt.gz")
 
 
 def library(sounds: Path, script: Path) -> list[tuple[str, Path, str]]:
@@ -65,8 +69,9 @@ def snr_db(samples: np.ndarray, rate: int) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sounds", type=Path, default=SOUNDS)
-    ap.add_argument("--script", type=Path, default=SCRIPT)
+    ap.add_argument("--language", default="en", help="the library's language: en, fr, es, it, ru")
+    ap.add_argument("--sounds", type=Path, help="the recordings' folder (default: Asterisk's)")
+    ap.add_argument("--script", type=Path, help="the script file (default: Asterisk's)")
     ap.add_argument("--half", choices=("odd", "even", "all"), default="odd")
     ap.add_argument("--limit", type=int, default=0, help="at most this many lines (0: all)")
     ap.add_argument("--json", type=Path, help="write every case's outcome and scores here")
@@ -74,8 +79,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="also run the swapped rows through `facegen batch --on-mismatch warn` into OUT "
                          "(ARKit .json outputs) and count the lines its report.json flags")
     args = ap.parse_args(argv)
+    args.sounds = args.sounds or Path(str(SOUNDS).format(args.language))
+    args.script = args.script or Path(str(SCRIPT).format(args.language))
     if not args.script.is_file():
-        print(f"{args.script} is missing: apt-get install asterisk-core-sounds-en-wav", file=sys.stderr)
+        print(f"{args.script} is missing: apt-get install asterisk-core-sounds-{args.language}-wav "
+              f"asterisk-core-sounds-{args.language}", file=sys.stderr)
         return 2
 
     from facegen import align, transcript_match
@@ -109,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
         per_word.clear()
         start = time.perf_counter()
         try:
-            align.align(samples, rate, text)
+            align.align(samples, rate, text, language=args.language)
             outcome, why = "accepted", ""
         except FacegenError as exc:
             outcome, why = "refused", str(exc)
