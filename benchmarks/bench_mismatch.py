@@ -104,10 +104,10 @@ def main(argv: list[str] | None = None) -> int:
 
     per_word: list[list[float]] = []
 
-    def recording(loud, words, gaps, free, snr_db=0.0):
+    def recording(loud, words, gaps, free, snr_db=0.0, **kw):
         scores.append(transcript_match.match_scores(loud, words, gaps, free))
         per_word.append([round(float(gaps[f:l + 1].mean() - free[f:l + 1].mean()), 2) for _, f, l in words])
-        return check(loud, words, gaps, free, snr_db)
+        return check(loud, words, gaps, free, snr_db, **kw)
 
     align.judge = recording
     cases = []

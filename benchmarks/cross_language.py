@@ -36,28 +36,11 @@ LEAD = 0.4
 
 
 def truth_phones(speech, voice: str) -> list[tuple[str, float, float]]:
-    """The synthesiser's phones as (rig phone, start, end), labelled from espeak-ng's IPA of each word."""
-    from facegen.espeak import phonemize
-    from facegen.phonetics import CMU_VOWELS, ipa_to_cmu, is_silence
+    """The synthesiser's phones as (rig phone, start, end), labelled from espeak-ng's IPA of each word (as the
+    voices corpus labels them: facegen.synth.voices.ipa_phone_times), LEAD seconds later."""
+    from facegen.synth.voices import ipa_phone_times
 
-    out = []
-    for k, word in enumerate(speech.words):
-        ipa = phonemize(word.text, voice, ipa=True)
-        own = [p for p in speech.phones if p.word == k and not is_silence(p.text)]
-        if own and len(own) == len(ipa):
-            for segment, p in zip(ipa, own, strict=True):
-                parts = ipa_to_cmu([segment])
-                edges = np.linspace(p.start, p.end, len(parts) + 1)
-                out += [(c, edges[i] + LEAD, edges[i + 1] + LEAD) for i, c in enumerate(parts)]
-            continue
-        cmu = ipa_to_cmu(ipa)
-        if not cmu:
-            continue
-        weights = np.array([2.0 if c in CMU_VOWELS else 1.0 for c in cmu])
-        shares = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
-        edges = word.start + (word.end - word.start) * shares
-        out += [(c, edges[i] + LEAD, edges[i + 1] + LEAD) for i, c in enumerate(cmu)]
-    return out
+    return [(c, a + LEAD, b + LEAD) for c, a, b in ipa_phone_times(speech, voice)]
 
 
 def measure(animator, code: str, text: str, k: int, folder: Path) -> dict:

@@ -201,6 +201,8 @@ def test_help_is_fast_and_lists_commands():
     (["data", "synth", "{d}/out", "--preset", "voices", "--subjects", "F2"],
      "do not apply to --preset voices"),
     (["data", "synth", "{d}/out", "--limit", "3"], "--limit applies to --preset voices only"),
+    (["data", "synth", "{d}/out", "--languages", "fr"], "--languages applies to --preset voices only"),
+    (["data", "synth", "{d}/out", "--preset", "voices", "--languages", "fr,nl"], "no voices for 'nl'"),
     (["align", "{speech}", "--phones"], "--phones needs the transcript"),
     (["align", "{speech}", "--text", "hi", "--phones", "-o", "{d}/out.csv"],
      "use a .json or .TextGrid file name"),

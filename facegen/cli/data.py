@@ -72,8 +72,9 @@ def synth(out, subjects, sentences, preset, limit, languages, seed, fps, workers
         click.echo(f"{len(manifest['done']) - failed} sequences in {out}"
                    + (f" ({failed} failed)" if failed else ""))
         return
-    if limit is not None or languages is not None:
-        raise FacegenError("--limit and --languages apply to --preset voices only: drop them")
+    for name, value in (("--limit", limit), ("--languages", languages)):
+        if value is not None:
+            raise FacegenError(f"{name} applies to --preset voices only: drop it")
     from facegen.synth.corpus import synthesize_corpus
 
     report = synthesize_corpus(out, subjects, sentences, preset=preset, fps=fps, seed=seed, workers=workers,
