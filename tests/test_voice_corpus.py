@@ -188,6 +188,15 @@ def test_foreign_sentences_are_words_of_their_language():
             assert not any(c.isdigit() for c in sentence)
             assert not [w for w in words if len(w) == 1 and w.lower() in "bcdfghjklmnpqrstvwxz"]
     assert any("ς" in s for s in foreign_sentences("el", 40))  # final sigma restored
+    # no emotional word, of English or of any lexicon of facegen.lexicons: those stay unseen in training
+    from facegen.lexicons import lexicon
+    from facegen.synth.lexicon import LEXICON
+
+    drawn = {w.strip(".,?").lower() for code in ("fr", "es", "it", "pt", "de", "ru")
+             for s in foreign_sentences(code, 300) for w in s.split()}
+    assert "triste" in {w for code in ("fr", "es", "it", "pt") for w in lexicon(code)}
+    assert not drawn & ({w.lower() for w in LEXICON} | {w for code in ("fr", "es", "it", "pt", "de", "ru")
+                                                       for w in lexicon(code)})
 
 
 def test_foreign_phones_are_labelled_from_the_ipa():

@@ -9,6 +9,11 @@ stay frequent, but content words are common enough to carry the rarer phones), t
 comma after a random word in long ones, a full stop or question mark at the end. Words are kept when every
 character is a letter or mark of the language's scripts (facegen.languages.SCRIPTS): no digits, no
 abbreviations, no foreign-script names, no lone consonant letters (the fragments of French l' or d').
+
+No emotional word is ever drawn: none of the English lexicons' (facegen.synth.lexicon.LEXICON, what the rig's
+upper face answers) and none of any language's emotional lexicon (facegen/lexicons.json, which the text
+encoder reads glossed). The rig gives these sentences a neutral upper face, which is right for them, and every
+emotional word of another language stays unseen in training (the held-out test of facegen.lexicons).
 """
 
 from __future__ import annotations
@@ -47,6 +52,15 @@ def _is_word(word: str, scripts: set[str], code: str) -> bool:
 
 
 @cache
+def _emotional() -> frozenset[str]:
+    """Every emotional word facegen knows, lower case: the English lexicons' and facegen/lexicons.json's."""
+    from facegen.lexicons import LANGUAGES, lexicon
+    from facegen.synth.lexicon import LEXICON
+
+    return frozenset({w.lower() for w in LEXICON} | {w.lower() for code in LANGUAGES for w in lexicon(code)})
+
+
+@cache
 def word_list(code: str) -> tuple[tuple[str, ...], np.ndarray]:
     """The language's TOP commonest words that are written in its scripts, and their draw probabilities."""
     try:
@@ -59,7 +73,8 @@ def word_list(code: str) -> tuple[tuple[str, ...], np.ndarray]:
     if code not in wordfreq.available_languages():
         raise FacegenError(f"wordfreq has no word list for {code!r}: choose a language it lists")
     scripts = set(check_language(code).scripts)
-    words = [w for w in wordfreq.top_n_list(code, TOP) if _is_word(w, scripts, code)]
+    words = [w for w in wordfreq.top_n_list(code, TOP)
+             if _is_word(w, scripts, code) and w not in _emotional()]
     freqs = np.array([wordfreq.word_frequency(w, code) for w in words]) ** FLATTEN
     return tuple(words), freqs / freqs.sum()
 
