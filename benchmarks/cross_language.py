@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_languages import said
 from language_sentences import SENTENCES
 
 ENGLISH = ["Good morning everyone, I am very happy to see you all today.",
@@ -53,14 +54,16 @@ def measure(animator, code: str, text: str, k: int, folder: Path) -> dict:
 
     voice = check_language(code).voice
     variant, rate, pitch = VOICES[k % len(VOICES)]
-    speech = synthesize(text, voice=voice, variant=variant, rate=rate, pitch=pitch, sample_rate=16000)
+    speech = synthesize(said(text, code), voice=voice, variant=variant, rate=rate, pitch=pitch,
+                        sample_rate=16000)
     lead = np.zeros(int(LEAD * 16000), np.float32)
     audio = np.concatenate([lead, speech.audio, np.zeros(4000, np.float32)])
     level = np.sqrt(np.mean(speech.audio ** 2)) * 10 ** (-30 / 20)  # room noise at 30 dB SNR
     audio += (level * np.random.default_rng(k).standard_normal(len(audio))).astype(np.float32)
     wav = folder / f"{code}_{k}.wav"
     write_wav(audio, 16000, wav)
-    anim = animator.animate(wav, text=text, language=code, blink_rate=0, head_motion=0)
+    anim = animator.animate(wav, text=text, language=code, blink_rate=0, head_motion=0, on_mismatch="warn")
+    refused = bool(anim.metadata.get("transcript_match", {}).get("problem"))
     phones = truth_phones(speech, voice)
     words = [(w.text, w.start + LEAD, w.end + LEAD) for w in speech.words]
     ref = rig_reference(phones, words, anim.num_frames, anim.fps, alphabet="cmu",
@@ -71,7 +74,7 @@ def measure(animator, code: str, text: str, k: int, folder: Path) -> dict:
     aligned = anim.metadata["words"]
     onsets = [1000 * abs(a["start"] - (w.start + LEAD)) for a, w in zip(aligned, speech.words, strict=True)
               ] if len(aligned) == len(speech.words) else []
-    return row, onsets
+    return row, onsets, refused
 
 
 def main() -> None:
@@ -98,8 +101,9 @@ def main() -> None:
                 continue
             start = time.perf_counter()
             done = [measure(animator, code, text, k, Path(tmp)) for k, text in enumerate(sentences)]
-            pooled = pool_lipsync([row for row, _ in done])
-            onsets = [e for _, found in done for e in found]
+            pooled = pool_lipsync([row for row, _, _ in done])
+            onsets = [e for _, found, _ in done for e in found]
+            pooled["refused"] = sum(refused for _, _, refused in done)
             pooled["onset_median_ms"] = float(np.median(onsets)) if onsets else None
             pooled["seconds"] = round(time.perf_counter() - start, 1)
             results[code] = pooled
@@ -111,7 +115,8 @@ def main() -> None:
             print(f"| {code}{' (held out)' if code in HELD_OUT else ''} | {f(p['aperture_r'], '.2f')} | "
                   f"{f(p['aperture_median_ratio'], '.2f')} | {f(p['bilabial_closure_rate'], '.0%')} "
                   f"({f(p['ref_bilabial_closure_rate'], '.0%')}) | {f(p['crossed_lips_rate'], '.1%')} | "
-                  f"{f(p['onset_median_ms'], '.0f')} |", flush=True)
+                  f"{f(p['onset_median_ms'], '.0f')} |" + (f" {p['refused']} refused, animated anyway"
+                                                          if p["refused"] else ""), flush=True)
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
     if args.figures:

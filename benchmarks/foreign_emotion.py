@@ -2,16 +2,16 @@
 
 For each language, one sentence frame ("My brother was really ___ last night", in that language) is said
 by libespeak-ng in that language with each of eight emotional words (joy, sadness, anger, fear, surprise),
-aligned with `--language`, and animated by the default model; then animated again on the same audio and
+aligned with `--language`, and animated by the default model (or --model); then animated again on the same audio and
 word times with a neutral word (e.g. "tall") in the emotional word's place. The text effect is issue 10's
 unseen-word response (lipsync.upper_face_response: the upper face's motion with the emotional word over its
 motion with the neutral one; >= 1.5 wanted), with the emotional word read through its English gloss
 (facegen.lexicons: today) and as written (the English encoder alone: before). None of these foreign words
-is in any training sentence (the training corpus is English); their glosses are training-lexicon words.
+is in any training sentence (the voices corpus's foreign sentences leave out every lexicon word); their glosses are training-lexicon words.
 English is the reference row. A line the mismatch check refuses is animated anyway (--on-mismatch warn)
 and counted in "refused".
 
-    python benchmarks/foreign_emotion.py [--out benchmarks/results/foreign_emotion.json]
+    python benchmarks/foreign_emotion.py [--model M] [--out benchmarks/results/foreign_emotion.json]
 """
 
 from __future__ import annotations
@@ -99,10 +99,11 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "foreign_emotion.json")
     parser.add_argument("--languages", nargs="*", default=list(FRAMES))
+    parser.add_argument("--model", help="a model bundle (default: the built-in one)")
     args = parser.parse_args()
     from facegen.animator import Animator
 
-    animator = Animator(None)
+    animator = Animator(args.model)
     results = {}
     print("| language | text effect, glossed (median) | min | as written (the English encoder alone) | "
           "refused by the mismatch check |")
