@@ -213,6 +213,8 @@ def _timings(text: str, events: list[tuple[int, int, int, str]], rate: int, dura
             stream.append((name, t, -1 if pause or not subs else len(subs) - 1))
     for i, (name, start, sub) in enumerate(stream):
         end = stream[i + 1][1] if i + 1 < len(stream) else duration
+        if sub >= 0 and not subs[sub][2] and _is_stop(name):  # a word's first phone: the silence between
+            start = max(subs[sub][1], start - MAX_CLOSURE)       # the word's start and a stop is its closure
         if sub >= 0:
             subs[sub][2].append((name, start, end))
     for i, sub in enumerate(subs):
@@ -251,6 +253,18 @@ def _timings(text: str, events: list[tuple[int, int, int, str]], rate: int, dura
             words.append(Word(tokens[tok][2], start, end))
         phone_list += [Phone(name, s, max(s, min(e, end)), index[tok]) for name, s, e in phones]
     return words, phone_list
+
+
+MAX_CLOSURE = 0.12  # seconds of silence before a word's first stop that belong to the stop's closure
+
+
+def _is_stop(name: str) -> bool:
+    """An espeak phoneme mnemonic of a stop or affricate (p, b, t, d, k, g, c, q and their variants: tS,
+    dZ, ts, t#, kh ...). espeak's event for a word's first stop comes at its release, after the silent closure
+    that follows the word's event: the lips (or the tongue) are closed from the word's start, not from the
+    burst (a phone alignment of the audio, pocketsphinx's too, puts the closure in the stop)."""
+    name = name.lstrip("',%=")
+    return bool(name) and name[0] in "pbtdkgcq"
 
 
 def _split(phones: list, counts: list[int], own: int) -> list[list]:
