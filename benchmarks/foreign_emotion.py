@@ -1,15 +1,15 @@
 """Benchmark (issue 25): the upper face's answer to emotional words in other languages.
 
-For each language, one sentence frame ("My brother was really ___ last night", in that language) is said
-by libespeak-ng in that language with each of eight emotional words (joy, sadness, anger, fear, surprise),
-aligned with `--language`, and animated by the default model (or --model); then animated again on the same audio and
-word times with a neutral word (e.g. "tall") in the emotional word's place. The text effect is issue 10's
-unseen-word response (lipsync.upper_face_response: the upper face's motion with the emotional word over its
-motion with the neutral one; >= 1.5 wanted), with the emotional word read through its English gloss
-(facegen.lexicons: today) and as written (the English encoder alone: before). None of these foreign words
-is in any training sentence (the voices corpus's foreign sentences leave out every lexicon word); their glosses are training-lexicon words.
-English is the reference row. A line the mismatch check refuses is animated anyway (--on-mismatch warn)
-and counted in "refused".
+For each language, one sentence frame ("My brother was really ___ last night", in that language) is said by
+libespeak-ng in that language with each of eight emotional words (joy, sadness, anger, fear, surprise),
+aligned with `--language`, and animated by the default model (or --model); then animated again on the same
+audio and word times with a neutral word (e.g. "tall") in the emotional word's place. The text effect is
+issue 10's unseen-word response (lipsync.upper_face_response: the upper face's motion with the emotional
+word over its motion with the neutral one; >= 1.5 wanted), with the emotional word read through its English
+gloss (facegen.lexicons: today) and as written (the English encoder alone: before). None of these foreign
+words is in any training sentence (the voices corpus's foreign sentences leave out every lexicon word);
+their glosses are training-lexicon words. English is the reference row. A line the mismatch check refuses is
+animated anyway (--on-mismatch warn) and counted in "refused".
 
     python benchmarks/foreign_emotion.py [--model M] [--out benchmarks/results/foreign_emotion.json]
 """

@@ -8,6 +8,7 @@ thread-safe, so every call into it holds one lock.
 from __future__ import annotations
 
 import ctypes
+import itertools
 import os
 import re
 import threading
@@ -273,7 +274,7 @@ def _closures_to_stops(phones: list[Phone], audio: np.ndarray, rate: int) -> Non
     at the release): move that silence — the phone's last 5 ms frames 25 dB or more below its loudest, at most
     MAX_CLOSURE, leaving it 10 ms — into the stop, in place."""
     hop = rate // 200
-    for prev, stop in zip(phones, phones[1:]):
+    for prev, stop in itertools.pairwise(phones):
         if not _is_stop(stop.text) or prev.word != stop.word or abs(prev.end - stop.start) > 1e-6:
             continue
         a, b = int(prev.start * rate), int(prev.end * rate)

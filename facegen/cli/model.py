@@ -86,7 +86,7 @@ def info(bundle, as_json):
 @click.option("--patience", type=click.IntRange(min=1),
               help="Stop after this many epochs without a better validation loss.")
 @click.option("--phones", is_flag=True, help="Add the phone stream (per-frame phones) to the audio encoder.")
-@click.option("--init", type=click.Path(dir_okay=False, exists=True),
+@click.option("--init", type=click.Path(dir_okay=False),
               help="Start from this bundle's weights (fine-tuning; the same network and features).")
 @split_options
 @click.option("--quiet", "-q", is_flag=True)
