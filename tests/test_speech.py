@@ -208,3 +208,25 @@ def test_write_wav_round_trips(hello, tmp_path):
     assert sr == hello.sample_rate and len(data) == len(hello.audio)
     assert np.max(np.abs(data - hello.audio)) < 1e-4
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hello.wav"]  # no temporary file left
+
+
+def test_a_stop_holds_its_silent_closure():
+    """espeak reports a stop at its release: the silence before it (after a word's start, or at the end of
+    the vowel before it inside a word) belongs to the stop, where the lips are closed."""
+    speech = synthesize("Please keep the paper by the big pot", voice="en-us")
+    rate, hop = speech.sample_rate, speech.sample_rate // 200
+    for word_index, word in enumerate(speech.words):
+        own = [p for p in speech.phones if p.word == word_index]
+        if own and own[0].text.lstrip("'") in {"p", "k", "b", "t", "g", "d"}:
+            assert own[0].start == pytest.approx(word.start, abs=1e-6), (word.text, own[0])
+    closures = 0
+    for prev, stop in itertools.pairwise(speech.phones):
+        if prev.word != stop.word or stop.text not in {"p", "t", "k", "b", "d", "g"}:
+            continue
+        frames = speech.audio[int(prev.start * rate): int(prev.end * rate)]
+        frames = frames[: len(frames) // hop * hop].reshape(-1, hop)
+        db = 10 * np.log10(np.mean(frames.astype(np.float64) ** 2, axis=1) + 1e-12)
+        assert not (db[-2:] < db.max() - 25).all(), (prev, stop)  # no silent tail left in the vowel
+        inside = speech.audio[int(stop.start * rate): int(stop.start * rate) + 2 * hop].astype(np.float64)
+        closures += 10 * np.log10(np.mean(inside ** 2) + 1e-12) < db.max() - 25
+    assert closures >= 1  # "paper": the second p's closure moved out of the vowel into the stop
