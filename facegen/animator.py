@@ -264,13 +264,13 @@ class Animator:
                 with PROFILE.stage("while_aligning"):
                     meanwhile()
             if uses_text:
-                from facegen.lexicons import glossed
+                from facegen.text import language_word_vectors
                 from facegen.words import spoken_words
 
                 backend = self.text_backend()
                 with PROFILE.stage("text_features"):
                     names = [word for word, _ in spoken_words(text, language)]
-                    early = names, backend.word_vectors(glossed(names, language))
+                    early = names, language_word_vectors(backend, names, language)
         if bundle.config.n_phones:
             with PROFILE.stage("alignment"):
                 timing = clip_words_and_phones(samples, sr, T, cfg.fps, text=text, alignment=alignment,

@@ -100,7 +100,7 @@ def test_the_arkit_fit_sees_the_scaled_motion(tmp_path):
     wa, wb = np.array(a["weightMat"]), np.array(b["weightMat"])
     jaw, brow = names.index("jawOpen"), names.index("browInnerUp")
     assert wb[:, jaw].max() > 1.4 * wa[:, jaw].max()
-    assert wb[:, brow].max() < 0.02 < wa[:, brow].max()
+    assert wb[:, brow].max() < 0.005 and wa[:, brow].max() > 0.01  # upper=0: the fit's crosstalk alone
 
 
 def test_bad_strength_is_one_line_and_writes_nothing(tmp_path):
