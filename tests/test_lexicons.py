@@ -80,3 +80,18 @@ def test_the_upper_face_answers_an_emotional_word_in_another_language(tmp_path, 
     response = upper_face_response(calm, rest + animator.offsets(clip), geo, rest_pose=rest)
     as_written = upper_face_response(calm, face(clip.words, None), geo, rest_pose=rest)
     assert response >= 1.5 and response > as_written, (response, as_written)
+
+
+def test_a_glossed_word_is_read_in_an_english_phrase_and_the_rest_in_the_sentence():
+    from facegen.text import GLOSS_CARRIER, language_word_vectors, load_text_backend
+
+    backend = load_text_backend()
+    french = ["Il", "était", "furieux", "hier"]
+    read = language_word_vectors(backend, french, "fr")
+    phrase = GLOSS_CARRIER.format("furious").split()
+    np.testing.assert_allclose(read[2], backend.word_vectors(phrase)[phrase.index("furious")], atol=1e-5)
+    in_sentence = backend.word_vectors(["Il", "était", "furious", "hier"])
+    np.testing.assert_allclose(read[[0, 1, 3]], in_sentence[[0, 1, 3]], atol=1e-5)
+    english = ["He", "was", "furious"]
+    np.testing.assert_allclose(language_word_vectors(backend, english, None), backend.word_vectors(english))
+    assert language_word_vectors(backend, [], "fr").shape == (0, backend.dim)
