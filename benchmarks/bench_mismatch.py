@@ -70,6 +70,9 @@ def snr_db(samples: np.ndarray, rate: int) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--language", default="en", help="the library's language: en, fr, es, it, ru")
+    ap.add_argument("--align-as", metavar="CODE",
+                    help="align in this language instead (e.g. English prompts as en-us-nyc: the espeak-ng "
+                         "path every other language takes, on recordings not kept back)")
     ap.add_argument("--sounds", type=Path, help="the recordings' folder (default: Asterisk's)")
     ap.add_argument("--script", type=Path, help="the script file (default: Asterisk's)")
     ap.add_argument("--half", choices=("odd", "even", "all"), default="odd")
@@ -117,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         per_word.clear()
         start = time.perf_counter()
         try:
-            align.align(samples, rate, text, language=args.language)
+            align.align(samples, rate, text, language=args.align_as or args.language)
             outcome, why = "accepted", ""
         except FacegenError as exc:
             outcome, why = "refused", str(exc)

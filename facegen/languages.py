@@ -88,12 +88,27 @@ def languages() -> dict[str, Language]:
     return dict(sorted(out.items()))
 
 
+# locale tags pipelines write (BCP 47) that name no espeak-ng voice, and the voice that reads them; any other
+# unknown tag with a region ("fr-CA", "de-AT", "pt-PT") reads as its language ("fr", "de", "pt")
+ALIASES = {"en-us": DEFAULT, "en-gb": "en-gb-x-rp", "en-uk": "en-gb-x-rp",
+           **dict.fromkeys(("zh", "zh-cn", "zh-hans", "zh-sg", "zh-tw", "zh-hant"), "cmn"), "zh-hk": "yue",
+           **{f"es-{region}": "es-419" for region in (
+               "mx", "us", "ar", "bo", "cl", "co", "cr", "cu", "do", "ec", "gt", "hn", "ni", "pa", "pe", "pr",
+               "py", "sv", "uy", "ve")}}
+
+
 def check_language(code: str | None) -> Language:
-    """The Language of `code` (None: English); an unknown code is a FacegenError saying how to list them."""
+    """The Language of `code` (None: English): an espeak-ng voice name, or a locale tag (ALIASES, or a
+    language with a region espeak-ng has no voice for: its language's). An unknown code is a FacegenError
+    saying how to list them."""
     if code is None:
         code = DEFAULT
     key = str(code).strip().lower().replace("_", "-")
-    found = languages().get(DEFAULT if key == "en-us" else key) if isinstance(code, str) else None
+    found = None
+    if isinstance(code, str):
+        table = languages()
+        key = ALIASES.get(key, key)
+        found = table.get(key) or (table.get(key.split("-")[0]) if "-" in key else None)
     if found is None:
         raise FacegenError(f"unknown language {code!r}: `facegen languages` lists the codes (e.g. en, fr, "
                            "de, es, pt-BR, ru, cmn)", param="language")

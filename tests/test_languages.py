@@ -30,6 +30,20 @@ def test_every_espeak_language_with_its_family_and_script():
         check_language("xx")
 
 
+@pytest.mark.parametrize("tag, voice", [
+    ("fr-CA", "fr"), ("de_AT", "de"), ("pt-PT", "pt"), ("pt-BR", "pt-BR"), ("fr-BE", "fr-BE"),
+    ("en-GB", "en-GB-x-rp"), ("en-AU", "en"), ("es-MX", "es-419"), ("es-ES", "es"), ("zh-CN", "cmn"),
+])
+def test_a_locale_tag_reads_as_its_voice_or_its_language(tag, voice):
+    """Pipelines name languages by locale; a region espeak-ng has no voice for reads as its language."""
+    assert check_language(tag).code == voice
+
+
+def test_an_unknown_language_with_a_region_is_still_unknown():
+    with pytest.raises(FacegenError, match="unknown language 'xx-YY'"):
+        check_language("xx-YY")
+
+
 def test_a_transcript_in_another_script_is_refused():
     check_script("Bonjour à tous, IBM et 42", check_language("fr"))
     check_script(RUSSIAN + " (Apple)", check_language("ru"))
