@@ -266,7 +266,7 @@ def mel_features(
         piece[max(-start, 0):max(-start, 0) + len(inside)] = inside
         framed = np.lib.stride_tricks.sliding_window_view(piece, cfg.n_fft)[::hop] * window  # [frames, n_fft]
         spec = np.fft.rfft(framed, axis=1)
-        power = (spec.real.astype(np.float32) ** 2 + spec.imag.astype(np.float32) ** 2)  # [frames, F]
+        power = (spec.real ** 2 + spec.imag ** 2).astype(np.float32, copy=False)  # [frames, F]
         db = 10.0 * np.log10(np.maximum(power @ bank, cfg.amin))
         feats[first:min(last, T)] = db[:max(min(last, T) - first, 0)]
     if 0 < frames < T:  # can only be short by a frame or so: repeat the last one

@@ -452,7 +452,7 @@ def language_word_vectors(backend: TextBackend, words: Sequence[str], language: 
     lexicon (facegen.lexicons), each emotional word is read as its English gloss inside GLOSS_CARRIER, a
     neutral English phrase, not among the foreign words around it: to an English encoder those are sub-word
     noise that blurs the gloss (measured with the built-in model, benchmarks/foreign_emotion.py: the upper
-    face's answer to French emotional words, median 1.72x read in the French sentence, 4.50x in the phrase).
+    face's answer to French emotional words, median 1.72x read in the French sentence, 4.24x in the phrase).
     Every other word keeps its vector from the (glossed) sentence.
     """
     from facegen.lexicons import glossed
@@ -481,7 +481,7 @@ def text_features(
 ) -> np.ndarray | WordFrames:
     """Per-frame smoothed text features ``[num_frames, backend.dim]`` float32 for timed words, at the fps
     and with the smoothing window of ``config`` (the bundle's features). Words of ``language`` (a code of
-    facegen.languages; None: English) are read as facegen.lexicons glosses them. `lazy`: as a WordFrames
+    facegen.languages; None: English) are read as language_word_vectors reads them. `lazy`: as a WordFrames
     (the same numbers, made when the network reads them)."""
     vectors = language_word_vectors(backend, [w.text for w in words], language)
     found = word_frames(words, vectors, num_frames, config)
