@@ -99,12 +99,14 @@ class Animation:
         self._part_tracks = (self.vertices, tracks)
         return tracks
 
-    def frame_blocks(self, block_frames: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    def frame_blocks(self, block_frames: int | None = None,
+                     ahead: bool = False) -> Iterator[tuple[int, np.ndarray]]:
         """(first frame, [n, V, 3] float32 frames) for consecutive blocks, for arrays and streams alike: a
-        FrameStream computes one block at a time (`block_frames`, default its own), an array is one block
-        (or blocks of `block_frames`)."""
+        FrameStream computes one block at a time (`block_frames`, default its own; `ahead`: the next one in a
+        thread while the caller uses this one), an array is one block (or blocks of `block_frames`)."""
         if self.streamed:
-            yield from self.vertices.blocks(block_frames)
+            stream = self.vertices
+            yield from stream.blocks(block_frames, ahead=True) if ahead else stream.blocks(block_frames)
             return
         frames = np.ascontiguousarray(self.vertices, dtype=np.float32)
         step = block_frames or max(len(frames), 1)

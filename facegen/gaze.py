@@ -162,9 +162,9 @@ class EyeTurns:
         for idx, c, axes, g in self.sides:
             p = out[:, at:at + len(idx)]
             u = (p - c) / axes
-            turned = np.einsum("tij,tnj->tni", rot, u)
+            turned = np.matmul(u, rot.transpose(0, 2, 1))  # each frame's points by its rotation
             mixed = u + g[None, :, None] * (turned - u)
-            mixed *= (np.linalg.norm(u, axis=2) / np.maximum(np.linalg.norm(mixed, axis=2), 1e-12))[..., None]
+            mixed *= np.sqrt(_squares(u) / np.maximum(_squares(mixed), 1e-24))[..., None]
             out[:, at:at + len(idx)] = c + mixed * axes
             at += len(idx)
         return out
@@ -172,6 +172,11 @@ class EyeTurns:
     def apply(self, start: int, frames: np.ndarray) -> None:
         """Turn the eyeballs of `frames` [n, V, 3] (frames start..) in place."""
         frames[:, self.indices] = self.turn(start, frames[:, self.indices])
+
+
+def _squares(points: np.ndarray) -> np.ndarray:
+    """The squared lengths of `points` [..., 3] (einsum: a third of np.linalg.norm's time)."""
+    return np.einsum("...i,...i->...", points, points)
 
 
 def lid_curves(gaze: np.ndarray) -> np.ndarray:

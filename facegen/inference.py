@@ -270,12 +270,27 @@ class FrameStream:
         return out
 
     def blocks(self, block_frames: int | None = None, start: int = 0,
-               stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
-        """(first frame, frames [n, V, 3]) for consecutive blocks of `block_frames`; each array is new."""
+               stop: int | None = None, ahead: bool = False) -> Iterator[tuple[int, np.ndarray]]:
+        """(first frame, frames [n, V, 3]) for consecutive blocks of `block_frames`; each array is new.
+        `ahead`: the next block is computed in a thread while the caller works on this one (numpy leaves the
+        GIL to the caller: a writer's own work overlaps it), two blocks held instead of one."""
         size = block_frames or self.block_frames
         stop = len(self) if stop is None else min(stop, len(self))
-        for s in range(start, stop, size):
-            yield s, self.compute(s, min(s + size, stop))
+        starts = range(start, stop, size)
+        if not ahead or len(starts) < 2:
+            for s in starts:
+                yield s, self.compute(s, min(s + size, stop))
+            return
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(1, thread_name_prefix="facegen-frames") as pool:
+            coming = pool.submit(self.compute, starts[0], min(starts[0] + size, stop))
+            for k, s in enumerate(starts):
+                block = coming.result()
+                if k + 1 < len(starts):
+                    coming = pool.submit(self.compute, starts[k + 1], min(starts[k + 1] + size, stop))
+                yield s, block
+                del block
 
     def with_layers(self, curves: np.ndarray, offsets: np.ndarray) -> FrameStream:
         """This stream plus layers: frame t gains sum_k curves[t, k] * offsets[k] (`curves` [T, K], `offsets`

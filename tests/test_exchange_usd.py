@@ -178,8 +178,8 @@ class Blocks:
     def __init__(self, frames: np.ndarray) -> None:
         self.frames, self.shape, self.calls = frames, frames.shape, []
 
-    def blocks(self, block_frames=None):
-        self.calls.append(block_frames)
+    def blocks(self, block_frames=None, ahead=False):
+        self.calls.append((block_frames, ahead))
         for start in range(0, len(self.frames), block_frames or 7):
             yield start, self.frames[start : start + (block_frames or 7)].copy()
 
@@ -192,7 +192,7 @@ def test_streamed_frames_are_written_block_by_block(tmp_path, grid_mesh, ext):
     assert streamed.streamed and not anim.streamed and format_of(tmp_path / f"a{ext}").streams_with({})
     write_animation(anim, tmp_path / f"a{ext}", write_audio=False)
     write_animation(streamed, tmp_path / f"b{ext}", write_audio=False)
-    assert stream.calls == [None]
+    assert stream.calls == ([(None, False)] if ext == ".npy" else [(256, True)])  # .usdc: next block ahead
     if ext == ".npy":  # the header np.save writes, then the blocks: the same bytes
         assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
         buffer = tmp_path / "c.npy"
@@ -350,3 +350,20 @@ def test_usdc_writes_a_minute(tmp_path, request):
     assert points.GetNumTimeSamples() == frames
     for frame in (0, 1234, frames - 1):
         np.testing.assert_array_equal(np.asarray(points.Get(frame)), anim.vertices[frame])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_vec3f_array_holds_the_points_as_from_numpy_does(dtype):
+    from pxr import Vt
+
+    from facegen.exchange.usd_values import vec3f_array
+
+    points = np.random.default_rng(3).normal(size=(23370, 3)).astype(dtype)
+    fast = vec3f_array(points[::-1])  # not contiguous: copied first
+    assert isinstance(fast, Vt.Vec3fArray) and len(fast) == 23370
+    np.testing.assert_array_equal(np.asarray(fast), np.asarray(Vt.Vec3fArray.FromNumpy(
+        np.ascontiguousarray(points[::-1], np.float32))))
+    assert tuple(fast[0]) == tuple(points[-1].astype(np.float32).tolist())
+    again = vec3f_array(points[:2] + 1)  # a new array each time: the first keeps its values
+    assert len(again) == 2 and tuple(fast[0]) == tuple(points[-1].astype(np.float32).tolist())
+    assert len(vec3f_array(np.zeros((0, 3)))) == 0

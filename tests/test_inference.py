@@ -3,6 +3,7 @@ profiles."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
@@ -83,6 +84,10 @@ def test_blockwise_equals_one_pass_at_seams(bundle, face):
     assert err[seams].max() <= 1e-3
     assert err.max() <= 1e-5  # the recurrences see the whole clip: the only difference is float rounding
     assert frames.blocks_computed == -(-T // 128)
+    ahead = list(frames.blocks(100, ahead=True))  # the next block computed in a thread: the same blocks
+    assert [s for s, _ in ahead] == list(range(0, T, 100)) and frames.blocks_computed == -(-T // 128) + 7
+    np.testing.assert_array_equal(np.concatenate([b for _, b in ahead]), got)
+    assert all(b is not c for (_, b), (_, c) in itertools.pairwise(ahead))  # new arrays
 
 
 def test_default_model_blockwise_equals_one_pass(clips):

@@ -39,7 +39,7 @@ class Blocks:
     def __init__(self, frames: np.ndarray, fail_after: int | None = None) -> None:
         self.frames, self.shape, self.given, self.fail_after = frames, frames.shape, 0, fail_after
 
-    def blocks(self, block_frames=None):
+    def blocks(self, block_frames=None, ahead=False):
         for start in range(0, len(self.frames), 7):
             if self.fail_after is not None and start >= self.fail_after:
                 raise RuntimeError("inference failed")

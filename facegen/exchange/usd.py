@@ -56,7 +56,7 @@ from facegen.exchange.formats import by_module
 from facegen.exchange.morph_targets import targets_as_written, writer_basis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.usd_parts import author_parts
-from facegen.exchange.usd_values import python_value, usd_dict
+from facegen.exchange.usd_values import python_value, usd_dict, vec3f_array
 from facegen.exchange.wav import atomic_with_sidecar
 from facegen.face.mesh import Mesh, check_topology
 
@@ -266,14 +266,15 @@ def _author_samples(layer, anim: Animation) -> None:
 
     Called with no stage open on the layer: a stage listening to the layer slows this loop by half.
     """
-    from pxr import Sdf, UsdGeom, Vt
+    from pxr import Sdf, UsdGeom
 
     points = Sdf.Path(MESH_PATH).AppendProperty("points")
     extent = Sdf.Path(MESH_PATH).AppendProperty("extent")
     with Sdf.ChangeBlock():
-        for start, block in anim.frame_blocks():  # a FrameStream: never more than one block besides the layer
+        # a FrameStream: the next block computed while this one is copied; no more than two besides the layer
+        for start, block in anim.frame_blocks(256, ahead=True):
             for i in range(len(block)):
-                frame = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(block[i], dtype=np.float32))
+                frame = vec3f_array(block[i])
                 layer.SetTimeSample(points, float(start + i), frame)
                 layer.SetTimeSample(extent, float(start + i), UsdGeom.PointBased.ComputeExtent(frame))
 

@@ -35,6 +35,7 @@ import numpy as np
 from facegen.animation import Animation
 from facegen.atomic import Transaction
 from facegen.errors import FacegenError
+from facegen.exchange.usd_values import vec3f_array
 
 CLIP_THRESHOLD = 3000  # frames (2 min at 25 fps): "auto" writes longer clips as value clips
 CLIP_FRAMES = 1500  # frames per clip layer (1 min at 25 fps: 420 MB of samples held at a time)
@@ -124,7 +125,7 @@ def write_clip_layers(anim: Animation, folder: Path, stem: str, mesh_path: str, 
             layer, points, extent = _new_layer(folder / names[index], mesh_path, anim.fps)
         with Sdf.ChangeBlock():
             for i in range(len(frames)):
-                value = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(frames[i], dtype=np.float32))
+                value = vec3f_array(frames[i])
                 layer.SetTimeSample(points, float(first + i), value)
                 layer.SetTimeSample(extent, float(first + i), UsdGeom.PointBased.ComputeExtent(value))
     _finish(layer, folder / names[index], index == 0 and manifest, mesh_path)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from facegen.animation import Animation
+from facegen.exchange.usd_values import vec3f_array
 from facegen.face.materials import MATERIALS, face_triangle_materials
 from facegen.face.parts import quaternions
 
@@ -102,7 +103,7 @@ def _author_part(stage, track, looks: dict) -> None:
         offsets = np.stack(list(part.targets.values())).astype(np.float64)
         for t, w in enumerate(track.weights):
             posed = rest + np.tensordot(w, offsets, 1).astype(np.float32)
-            points.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(posed, np.float32)), float(t))
+            points.Set(vec3f_array(posed), float(t))
     groups = [(name, np.arange(a, b)) for name, a, b in part.groups]
     if len(groups) == 1:
         UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(_material(stage, groups[0][0], looks))

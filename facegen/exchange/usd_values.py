@@ -1,12 +1,33 @@
-"""USD dictionary values (customLayerData) to and from plain Python: JSON-able values become typed Vt arrays
-where a list holds one scalar type, else JSON strings; reading turns Vt arrays back into lists."""
+"""USD values from Python: dictionary values (customLayerData) to and from plain Python (JSON-able values
+become typed Vt arrays where a list holds one scalar type, else JSON strings; reading turns Vt arrays back
+into lists), and one frame's points as a Vt.Vec3fArray (`vec3f_array`, the writers' hot path)."""
 
 from __future__ import annotations
 
+import ctypes
 import json
 from pathlib import Path
 
 import numpy as np
+
+
+def vec3f_array(points: np.ndarray):
+    """`points` [N, 3] as a new Vt.Vec3fArray, copied at memory speed.
+
+    usd-core's Vt.Vec3fArray.FromNumpy converts element by element (0.5 ms for a 23,370-point frame: 0.8 s of
+    a minute's .usdc), so the values are copied into a new array's own storage through the address its
+    read-only buffer view gives (a new VtArray owns its storage alone: the copy changes no other array)."""
+    from pxr import Vt
+
+    points = np.ascontiguousarray(points, np.float32)
+    if points.ndim != 2 or points.shape[1] != 3 or not len(points):
+        return Vt.Vec3fArray.FromNumpy(points)  # its own errors and the empty array
+    out = Vt.Vec3fArray(len(points))
+    view = np.asarray(out)
+    address, _ = view.__array_interface__["data"]
+    storage = (ctypes.c_float * points.size).from_address(address)
+    np.ctypeslib.as_array(storage)[:] = points.reshape(-1)
+    return out
 
 
 def usd_dict(values: dict) -> dict:
