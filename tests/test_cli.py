@@ -75,6 +75,22 @@ def test_animate_writes_valid_assets(work, ext, biwi_template):
     assert json.loads(val.stdout)["ok"] is True
 
 
+def test_the_input_audio_as_sidecar_is_not_said_to_be_written(work):
+    d, _ = work
+    folder = d / "beside"
+    folder.mkdir()
+    source = folder / "clip.wav"
+    source.write_bytes((d / "speech.wav").read_bytes())
+    model = d / "model.safetensors"
+    p = run("animate", source, "--text", SENTENCE, "--model", model, "-o", folder / "clip.usda")
+    assert p.returncode == 0, p.stderr
+    said = p.stderr.strip().splitlines()[-1]
+    assert said.startswith(f"facegen: wrote {folder / 'clip.usda'} (") and f"{source}, referenced)" in said
+    assert f"{folder / 'clip.usda'}, " not in said and source.read_bytes() == (d / "speech.wav").read_bytes()
+    p = run("animate", source, "--text", SENTENCE, "--model", model, "-o", folder / "b.usda")
+    assert f"wrote {folder / 'b.usda'}, {folder / 'b.wav'} (" in p.stderr and "referenced" not in p.stderr
+
+
 def test_alignment_file_and_no_text_and_text_file(work):
     d, _ = work
     for i, extra in enumerate((["--alignment", d / "words.json"], ["--no-text"], ["--text-file",

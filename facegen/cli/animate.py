@@ -159,8 +159,12 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
         warn_stderr(line)
     with Transaction():  # all or nothing: no animation without the preview asked for
         written = plan.write(anim)
-        reporter.progress(f"wrote {', '.join(str(p) for p in written)} ({anim.num_frames} frames at "
-                          f"{anim.fps:g} fps)")
+        from facegen.exchange.wav import is_same_file
+
+        kept = [p for p in written if is_same_file(audio, p)]  # clip.wav -> clip.usda: referenced
+        uses = f"; its audio: the input {kept[0]}, referenced" if kept else ""
+        reporter.progress(f"wrote {', '.join(str(p) for p in written if p not in kept)} ({anim.num_frames} "
+                          f"frames at {anim.fps:g} fps{uses})")
         if preview:
             from facegen.render import render_animation
 
