@@ -12,12 +12,14 @@ Blender's world coordinates (Z-up, meters) are mapped back as (x, z, -y) / m. Ex
 passed.
 
 --arkit mode, SPEC.json: {"keys": [shape key names of the generated character], "frames": [frames to
-sample], "apply": [{"file": .json/.csv, "target": object name}, ...], "errors": [{"file", "target"}, ...],
+sample], "apply": [{"file": .json/.csv, "target": object name, "head": object name or absent}, ...],
+"errors": [{"file", "target"}, ...],
 "timed": {"file": a long .json, "keys": [names], "vertices": approx. vertex count}}. A UV sphere "Character"
 gets the keys (each moving a few vertices), a cube "Prop" none, a sphere "Other" keys not named like
-ARKit's. Reports per application the helper's result, the scene's fps, frame range and sound strips, and
-each shape key's value at the sampled frames; per error case the message; the seconds the timed one took.
-With --addon the applications go through the installed add-on's operator instead of the helper.
+ARKit's. Reports per application the helper's result, the scene's fps, frame range and sound strips,
+each shape key's value at the sampled frames and (with "head") the head object's world rotation there;
+per error case the message; the seconds the timed one took. With --addon the applications go through the
+installed add-on's operator instead of the helper.
 
 Prints one line "blender_check: {...}". Only bpy and numpy are needed (no facegen install).
 """
@@ -180,9 +182,16 @@ def check_arkit(spec: dict, addon: Path | None) -> dict:
             result = bpy.ops.facegen.import_animation(filepath=case["file"], target=case["target"])
             done = {"operator": sorted(result)}
         else:
-            done = helper.import_file(case["file"], target=case["target"])
-        out["applied"].append({"import": done, "scene": scene_state(scene),
-                               "values": sampled(scene, characters, spec["frames"])})
+            done = helper.import_file(case["file"], target=case["target"], head=case.get("head"))
+        applied = {"import": done, "scene": scene_state(scene), "values": sampled(scene, characters,
+                                                                                  spec["frames"])}
+        if case.get("head"):  # the head object's world rotation at the sampled frames
+            obj = bpy.data.objects[case["head"]]
+            applied["head"] = []
+            for frame in spec["frames"]:
+                scene.frame_set(frame)
+                applied["head"].append([list(r) for r in obj.matrix_world.to_3x3()])
+        out["applied"].append(applied)
     for case in spec["errors"]:
         try:
             helper.import_file(case["file"], target=case["target"])

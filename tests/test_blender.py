@@ -138,21 +138,36 @@ def arkit_weights(frames: int, seed: int = 0) -> np.ndarray:
     return weights.astype(np.float32)
 
 
-def write_audio2face(path: Path, weights: np.ndarray, fps: float) -> Path:
+def head_angles(frames: int) -> np.ndarray:
+    """[frames, 3] yaw, pitch, roll in degrees: three different slow turns."""
+    t = np.arange(frames) / 25.0
+    return np.stack([8 * np.sin(2 * np.pi * 0.5 * t), 5 * np.sin(2 * np.pi * 0.8 * t + 1),
+                     3 * np.sin(2 * np.pi * 0.3 * t + 2)], 1)
+
+
+def write_audio2face(path: Path, weights: np.ndarray, fps: float, head: np.ndarray | None = None) -> Path:
     doc = {"exportFps": fps, "trackPath": "/World/audio2face/Player", "numPoses": len(ARKIT_NAMES),
            "numFrames": len(weights), "facsNames": list(ARKIT_NAMES), "weightMat": weights.tolist()}
+    if head is not None:  # as facegen.exchange.arkit_json writes it
+        doc["facegenHead"] = {"angles": ["yaw", "pitch", "roll"], "units": "degrees",
+                              "order": "Ry(yaw) Rx(pitch) Rz(roll)", "pivot": [0.0, 0.0, 0.0],
+                              "values": head.tolist()}
     path.write_text(json.dumps(doc))
     return path
 
 
-def write_live_link(path: Path, weights: np.ndarray, fps: int) -> Path:
-    """`weights` [T, 52] in ARKIT_NAMES order, written in the CSV's own column order."""
+def write_live_link(path: Path, weights: np.ndarray, fps: int, head: np.ndarray | None = None) -> Path:
+    """`weights` [T, 52] in ARKIT_NAMES order, written in the CSV's own column order; `head` [T, 3] degrees
+    as HeadYaw, HeadPitch, HeadRoll (radians), else 0 (the eyes' columns always 0)."""
     rows = [",".join(LIVE_LINK_COLUMNS)]
     columns = [ARKIT_NAMES.index(arkit_name(c)) for c in LIVE_LINK_COLUMNS[2:2 + len(ARKIT_NAMES)]]
+    assert list(LIVE_LINK_COLUMNS[2 + len(ARKIT_NAMES):][:3]) == ["HeadYaw", "HeadPitch", "HeadRoll"]
+    turns = np.radians(head) if head is not None else np.zeros((len(weights), 3))
     for i, row in enumerate(weights[:, columns]):
         seconds, frame = divmod(i, fps)
         timecode = f"10:{seconds // 60:02d}:{seconds % 60:02d}:{frame:02d}.{round(1000 * frame / fps):03d}"
-        rows.append(",".join([timecode, "61", *(f"{w:.6f}" for w in row), *["0"] * 9]))
+        rows.append(",".join([timecode, "61", *(f"{w:.6f}" for w in row), *(f"{a:.8f}" for a in turns[i]),
+                              *["0"] * 6]))
     path.write_text("\n".join(rows) + "\n")
     return path
 
@@ -197,6 +212,25 @@ def test_read_weights_json_and_csv(tmp_path):
     clip = facegen_arkit.read_weights(tmp_path / "c.csv")
     assert clip["fps"] == 30
     np.testing.assert_allclose(clip["frames"], [0, 0.5, 59.5])
+
+
+def test_read_weights_head_motion(tmp_path):
+    weights, head = arkit_weights(30), head_angles(30)
+    clip = facegen_arkit.read_weights(write_audio2face(tmp_path / "h.json", weights, 25, head))
+    np.testing.assert_allclose(clip["head"], head, atol=1e-9)
+    clip = facegen_arkit.read_weights(write_live_link(tmp_path / "h.csv", weights, 25, head))
+    np.testing.assert_allclose(clip["head"], head, atol=1e-5)  # radians with 8 decimals
+    assert clip["weights"].shape == (30, 52)  # the head's columns are not weights
+    assert facegen_arkit.read_weights(write_live_link(tmp_path / "still.csv", weights, 25))["head"] is None
+    assert facegen_arkit.read_weights(write_audio2face(tmp_path / "none.json", weights, 25))["head"] is None
+    write_audio2face(tmp_path / "short.json", weights, 25, head[:29])
+    with pytest.raises(ValueError, match=re.escape("facegenHead values are [29, 3], expected [30, 3]")):
+        facegen_arkit.read_weights(tmp_path / "short.json")
+    doc = json.loads((tmp_path / "h.json").read_text())
+    doc["facegenHead"] = [1, 2]
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="facegenHead must be an object"):
+        facegen_arkit.read_weights(tmp_path / "bad.json")
 
 
 @pytest.mark.parametrize("content, message", [
@@ -252,6 +286,8 @@ def arkit_files(tmp_path_factory):
     # 2 s = 50 frames
     write_wav((0.1 * np.sin(np.arange(32000) / 5)).astype(np.float32), 16000, folder / "talk.wav")
     write_live_link(folder / "take.csv", weights["csv"], 30)
+    write_audio2face(folder / "turn.json", weights["json"], 25, head_angles(50))  # head motion: a json and
+    write_live_link(folder / "turn.csv", weights["csv"], 30, head_angles(45))  # a csv
     (folder / "bad.json").write_text(json.dumps({"exportFps": 25, "facsNames": ["x"], "weightMat": [[0.0]]}))
     write_audio2face(folder / "long.json", arkit_weights(1500, seed=4), 25)  # 60 s
     return folder, weights
@@ -262,7 +298,9 @@ def test_blender_applies_arkit_weights_by_name(blender_python, arkit_files, tmp_
     frames = [0, 1, 17, 31, 44]
     spec = {"keys": CHARACTER_KEYS, "frames": frames,
             "apply": [{"file": str(folder / "talk.json"), "target": "Character"},
-                      {"file": str(folder / "take.csv"), "target": "Character"}],
+                      {"file": str(folder / "take.csv"), "target": "Character"},
+                      {"file": str(folder / "turn.json"), "target": "Character", "head": "Prop"},
+                      {"file": str(folder / "turn.csv"), "target": "Character", "head": "Prop"}],
             "errors": [{"file": str(folder / "talk.json"), "target": "Nobody"},
                        {"file": str(folder / "talk.json"), "target": "Other"},
                        {"file": str(folder / "talk.json"), "target": "Prop"},
@@ -274,7 +312,7 @@ def test_blender_applies_arkit_weights_by_name(blender_python, arkit_files, tmp_
     found = {arkit_name(k) for k in CHARACTER_KEYS} - {None}
     unmatched = [n for n in ARKIT_NAMES if n not in found]
 
-    json_run, csv_run = result["applied"]
+    json_run, csv_run, *turned = result["applied"]
     done = json_run["import"]
     assert done["objects"] == ["Character"] and done["frames"] == 50 and done["keys"] == 10
     assert done["unmatched"] == unmatched and len(unmatched) == 52 - 9
@@ -293,6 +331,17 @@ def test_blender_applies_arkit_weights_by_name(blender_python, arkit_files, tmp_
                                                                                                     [])
     assert_keyed(csv_run["values"]["Character"], expected_values(weights["csv"], CHARACTER_KEYS, frames))
 
+    # the head's turn: facegen's rotation (facegen.head, Y-up) seen in Blender's Z-up world, where its
+    # importers put facegen's (x, y, z) at (x, -z, y)
+    from facegen.head import rotations
+
+    to_blender = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], np.float64)
+    for run, count in zip(turned, (50, 45), strict=True):
+        assert run["import"]["head"] == "Prop" and not any("head" in w for w in run["import"]["warnings"])
+        want = to_blender @ rotations(head_angles(count)[frames]) @ to_blender.T
+        np.testing.assert_allclose(np.array(run["head"]), want, atol=1e-5)
+        assert_keyed(run["values"]["Character"], expected_values(weights["json" if count == 50 else "csv"],
+                                                                 CHARACTER_KEYS, frames))
     missing, unnamed, bare, bad = result["errors"]
     assert missing.startswith("no object named 'Nobody': the objects "
                               "are ") and "Character, Other, Prop" in missing

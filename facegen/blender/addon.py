@@ -22,18 +22,21 @@ class FACEGEN_OT_import(bpy.types.Operator, ImportHelper):
                                 options={"HIDDEN"})
     target: StringProperty(name="Target", description="ARKit weights (.json/.csv): the object whose "
                            "ARKit-named shape keys get them (empty: the active object)", default="")
+    head: StringProperty(name="Head", description="ARKit weights with head motion: the object it turns (the "
+                         "head or the character's root, about its origin; empty: not keyed)", default="")
     fps: FloatProperty(name="FPS", description="Frame rate when the file states none (0: the file's)",
                        default=0.0, min=0.0)
     sound: BoolProperty(name="Sound strip", description="Add the clip's sound (the WAV beside the file, else "
                         "the one inside it) as a sound strip", default=True)
 
     def execute(self, context):
-        target = None
+        target = head = None
         if self.filepath.lower().endswith((".json", ".csv")):
             target = self.target or (context.active_object.name if context.active_object else None)
+            head = self.head or None
         try:
             done = import_file(self.filepath, fps=self.fps or None, sound=self.sound, scene=context.scene,
-                               target=target)
+                               target=target, head=head)
         except (OSError, RuntimeError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

@@ -5,8 +5,9 @@ Reading needs numpy only; `key_shapes` needs bpy. Like facegen_import.py this fi
 facegen (Blender's Python does not have it): it loads ARKit's 52 names and their name rule (`arkit_name`) from
 the file facegen/arkit/names.py itself, which the add-on zip carries beside it.
 
-    clip = read_weights("out.json")  # or out.csv; {"names", "weights" [T, N], "frames" [T], "fps", ...}
+    clip = read_weights("out.json")  # or out.csv; {"names", "weights" [T, N], "frames" [T], "head", ...}
     done = key_shapes([bpy.data.objects["Face"]], clip)   # {"matched": {...}, "unmatched": [...]}
+    key_head(bpy.data.objects["Head"], clip)   # the head's turns (JSON facegenHead, CSV HeadYaw/Pitch/Roll)
 
 Keys are written a whole F-curve at a time (keyframe_points.add + foreach_set), LINEAR between frames,
 into a new action "facegen ARKit <file>" on each object's shape keys.
@@ -55,7 +56,9 @@ _TIMECODE = re.compile(r"^(\d{1,9}):(\d{1,9}):(\d{1,9})[:;](\d{1,9})(?:\.(\d{1,9
 def read_weights(path: str | Path, fps: float | None = None) -> dict:
     """ARKit weights from an Audio2Face JSON or a Live Link Face CSV: {"names": ARKit names of the columns,
     "weights": [T, N] float32, "frames": [T] key positions (frames from 0), "fps",
-    "audio": the WAV the file names or the one beside it (same stem), or None}. `fps` overrides the file's.
+    "audio": the WAV the file names or the one beside it (same stem), or None, "head": [T, 3] yaw, pitch, roll
+    in degrees (the JSON's facegenHead, the CSV's HeadYaw/HeadPitch/HeadRoll), or None when the file has
+    none or they are all 0}. `fps` overrides the file's.
     Raises ValueError (one line) when the file is not ARKit-shaped, is not a regular file (a FIFO, a device:
     refused at once, not waited on), or is past facegen's bounds (arkit_read.py: 4 hours, 512 MB; read in
     bounded memory, most refusals before the rows are read)."""
@@ -79,6 +82,10 @@ def read_weights(path: str | Path, fps: float | None = None) -> dict:
                          f"({READ.MAX_FPS:g}): pass --fps")
     if not np.isfinite(clip["weights"]).all():
         raise ValueError(f"{path.name}: the weights hold NaN or infinite values")
+    head = clip.get("head")
+    if head is not None and not np.isfinite(head).all():
+        raise ValueError(f"{path.name}: the head rotations hold NaN or infinite values")
+    clip["head"] = head if head is not None and np.any(head) else None
     audio = clip.pop("audio_name", None)
     wav = path.parent / audio if isinstance(audio, str) and audio else path.with_suffix(".wav")
     clip["audio"] = str(wav) if wav.is_file() else None
@@ -180,7 +187,25 @@ def _read_json(path: Path, file, fps: float | None) -> dict:
     audio = extra.get("audio") if isinstance(extra, dict) else None
     weights = weights if columns == list(range(len(names))) else weights[:, columns]  # no copy when all are
     return {"names": ark, "weights": weights, "frames": np.arange(len(weights), dtype=np.float64),
-            "fps": float(rate), "audio_name": audio}
+            "fps": float(rate), "audio_name": audio, "head": _json_head(path, doc.get("facegenHead"),
+                                                                       len(weights))}
+
+
+def _json_head(path: Path, head, frames: int) -> np.ndarray | None:
+    """facegenHead's values ([frames][yaw, pitch, roll] degrees, facegen.exchange.arkit_json) or None."""
+    if head is None:
+        return None
+    table = _Table("facegenHead values")
+    values = head.get("values") if isinstance(head, dict) else None
+    if not isinstance(values, list):
+        raise ValueError(f"{path.name}: facegenHead must be an object with values [frames][yaw, pitch, "  # noqa: TRY004
+                         "roll]")
+    table.add(values)
+    angles = table.array(3).astype(np.float64)
+    if angles.shape != (frames, 3):
+        raise ValueError(f"{path.name}: facegenHead values are {list(angles.shape)}, expected [{frames}, 3] "
+                         "(yaw, pitch, roll per frame)")
+    return angles
 
 
 def _read_csv(path: Path, file, fps: float | None) -> dict:
@@ -192,6 +217,10 @@ def _read_csv(path: Path, file, fps: float | None) -> dict:
             raise ValueError(shape)
         ark, columns = _columns(path, header[2:])
         columns = [c + 2 for c in columns]
+        named = {h.lower(): i for i, h in enumerate(header)}
+        turns = [named.get(n) for n in ("headyaw", "headpitch", "headroll")]
+        turns = turns if None not in turns else []  # Live Link's head rotations, radians
+        columns += turns
         table, stamps, block, first = _Table("the CSV"), [], [], None
         for number, row in enumerate(rows, start=2):
             found = _TIMECODE.match(row[0].strip())
@@ -229,11 +258,14 @@ def _read_csv(path: Path, file, fps: float | None) -> dict:
         if fps > READ.MAX_FPS:
             raise ValueError(f"{path.name}: its Timecodes count {fps:.0f} frames in a second, more than "
                              f"facegen plays ({READ.MAX_FPS:g}): pass --fps")
+    head = None
+    if turns:  # the last three columns read
+        head, weights = np.degrees(weights[:, -3:].astype(np.float64)), weights[:, :-3]
     whole = seconds * round(fps) + stamps[:, 3]
     # ".mmm" is a sub-frame: only used when rows share a whole frame (e.g. 60 Hz rows on a 30 fps timecode)
     frames = whole + stamps[:, 4] / 1000.0 if len(np.unique(whole)) < len(whole) else whole.astype(np.float64)
     return {"names": ark, "weights": weights, "frames": frames - frames[0], "fps": float(fps),
-            "audio_name": None}
+            "audio_name": None, "head": head}
 
 
 # ---- keying (bpy) ------------------------------------------------------------------------------------------
@@ -295,6 +327,34 @@ def key_shapes(objects, clip: dict, name: str = "facegen ARKit") -> dict:
     return {"matched": matched, "unmatched": unmatched, "keys": written}
 
 
+def key_head(obj, clip: dict, name: str = "facegen head") -> int:
+    """Key the clip's head motion (read_weights' "head") onto `obj` (the head, or the character's root) as its
+    delta rotation, in a new action: the object keeps its own rotation and turns on top of it, about its
+    origin, as facegen's head turns about the top of the neck. facegen's angles are about its Y-up axes
+    (yaw about up, pitch about x, roll about the facing axis: Ry(yaw) Rx(pitch) Rz(roll)); in Blender's Z-up
+    world, as its glTF and USD importers bring facegen's face in (facing -Y), that is Rz(yaw) Rx(pitch)
+    Ry(-roll): rotation mode YXZ with (pitch, -roll, yaw). Returns the number of frames keyed (0: no head
+    motion in the clip)."""
+    head = clip.get("head")
+    if head is None:
+        return 0
+    radians = np.radians(np.asarray(head, np.float64))
+    obj.rotation_mode = "YXZ"  # Blender converts the object's own rotation to the new order
+    action = _new_action(obj, name)
+    count = len(clip["frames"])
+    co = np.empty((count, 2), np.float32)
+    co[:, 0] = clip["frames"]
+    linear = np.full(count, _enum_value("LINEAR"), np.int32)
+    for axis, values in enumerate((radians[:, 1], -radians[:, 2], radians[:, 0])):
+        co[:, 1] = values
+        fcurve = _fcurve(action, obj, "delta_rotation_euler", axis)
+        fcurve.keyframe_points.add(count)
+        fcurve.keyframe_points.foreach_set("co", co.ravel())
+        fcurve.keyframe_points.foreach_set("interpolation", linear)
+        fcurve.update()
+    return count
+
+
 def _enum_value(item: str) -> int:
     import bpy
 
@@ -302,7 +362,7 @@ def _enum_value(item: str) -> int:
 
 
 def _new_action(keys, name: str):
-    """A new action animating `keys` (a Key datablock), replacing the one it had."""
+    """A new action animating `keys` (a Key datablock, or an object), replacing the one it had."""
     import bpy
 
     action = bpy.data.actions.new(name)
@@ -311,7 +371,7 @@ def _new_action(keys, name: str):
     return action
 
 
-def _fcurve(action, keys, data_path: str):
+def _fcurve(action, keys, data_path: str, index: int = 0):
     if hasattr(action, "fcurve_ensure_for_datablock"):  # Blender 4.4+: layered actions
-        return action.fcurve_ensure_for_datablock(keys, data_path)
-    return action.fcurves.new(data_path)
+        return action.fcurve_ensure_for_datablock(keys, data_path, index=index)
+    return action.fcurves.new(data_path, index=index)

@@ -12,12 +12,14 @@ embedded MP3), packs it into the .blend and leaves no temporary file behind.
 
 ARKit weights go onto the shape keys whose names match ARKit's 52 (facegen_arkit.py: case-insensitive,
 prefixes such as `blendShape1.` or `ARKit_` stripped, `_L`/`_R` = Left/Right) of the target objects; the
-scene gets the file's fps, frame range and sound, and the ARKit shapes without a shape key are listed.
+scene gets the file's fps, frame range and sound, and the ARKit shapes without a shape key are listed. The
+head's motion (the JSON's facegenHead, the CSV's HeadYaw/HeadPitch/HeadRoll) turns the object given as the
+head (its delta rotation, about its origin: facegen_arkit.key_head); without one it is said to be left out.
 
 Three ways to use it:
 
     blender --python facegen_import.py -- out.glb [--fps 25] [--audio out.wav] [--empty] [--save out.blend]
-    blender character.blend --python facegen_import.py -- out.json --target Face [--save out.blend]
+    blender avatar.blend --python facegen_import.py -- out.json --target Face [--head Head] [--save a.blend]
     import facegen_import; facegen_import.import_file("out.usdc")      # inside Blender's Python / bpy
     the add-on (this folder, zipped as facegen_blender, see docs/dcc.md): File > Import > facegen animation
 
@@ -224,18 +226,20 @@ def scene_fps(scene) -> float:
 
 
 def import_file(path: str | os.PathLike, *, fps: float | None = None, audio: str | os.PathLike | None = None,
-                sound: bool = True, scene=None, target=None) -> dict:
+                sound: bool = True, scene=None, target=None, head=None) -> dict:
     """Import a facegen animation into `scene` (default: the current one) and set it up for playback.
 
     A .glb/.gltf/.usd* file is imported with Blender's importer. A .json (Audio2Face) or .csv (Live Link
     Face) of ARKit weights is keyed onto the shape keys named like ARKit's of `target` (an object or its
-    name, or a list of them; default: every object with such shape keys). `fps` overrides the file's rate
+    name, or a list of them; default: every object with such shape keys), and its head motion onto `head` (an
+    object or its name: the head, or the character's root; None: not keyed, a warning). `fps` overrides the
+    file's rate
     (needed only for files that state none); `audio` replaces the WAV beside the file; `sound=False` adds
     no sound strip. Returns what was done: objects, fps, frames, sound (strip name or None), audio (its
     file), warnings; for glTF/USD also mesh; for ARKit weights also matched, unmatched (ARKit shapes no
     shape key stands for), keys. Raises ValueError/OSError/RuntimeError with a one-line message.
     """
-    return _import(read_file(path, fps, target, audio), sound=sound, scene=scene, target=target)
+    return _import(read_file(path, fps, target, audio), sound=sound, scene=scene, target=target, head=head)
 
 
 def read_file(path: str | os.PathLike, fps: float | None = None, target=None,
@@ -258,14 +262,17 @@ def read_file(path: str | os.PathLike, fps: float | None = None, target=None,
     return {"path": path, "fps": fps, "audio": audio, "clip": clip, "arkit": arkit}
 
 
-def _import(read: dict, *, sound: bool, scene, target) -> dict:
+def _import(read: dict, *, sound: bool, scene, target, head=None) -> dict:
     """import_file after read_file."""
     import bpy
 
     path, fps, audio = read["path"], read["fps"], read["audio"]
     scene = scene or bpy.context.scene
+    if read["clip"] is None and head is not None:
+        raise ValueError(f"{path.name}: --head applies to ARKit weights (.json, .csv); a {path.suffix} file "
+                         "carries the head's turn itself")
     if read["clip"] is not None:
-        done, info = _apply_weights(read["arkit"], path, read["clip"], target, scene)
+        done, info = _apply_weights(read["arkit"], path, read["clip"], target, scene, head)
     else:
         done, info = _import_animation(path, fps, scene)
     scene.frame_start = 0
@@ -273,7 +280,7 @@ def _import(read: dict, *, sound: bool, scene, target) -> dict:
     scene.frame_set(0)
     wav = str(audio) if audio is not None else info["audio"]
     embedded = info.get("embedded_audio") if wav is None else None
-    done.update(sound=None, audio=wav, warnings=[])
+    done.update(sound=None, audio=wav, warnings=info.get("warnings", []))
     if sound and (wav or embedded):
         with tempfile.TemporaryDirectory(prefix="facegen_audio_") as folder:
             if embedded:  # inside the file: written out for Blender to read, packed into the .blend, removed
@@ -336,10 +343,14 @@ def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]
     return done, info
 
 
-def _apply_weights(arkit, path: Path, clip: dict, target, scene) -> tuple[dict, dict]:
-    """Key an ARKit JSON/CSV's weights (read_weights) onto the target objects' shape keys at its rate; (what
-    was done, audio info)."""
+def _apply_weights(arkit, path: Path, clip: dict, target, scene, head=None) -> tuple[dict, dict]:
+    """Key an ARKit JSON/CSV's weights (read_weights) onto the target objects' shape keys at its rate, its
+    head motion onto `head`; (what was done, audio info and warnings)."""
     import bpy
+
+    turned = bpy.data.objects.get(head) if isinstance(head, str) else head
+    if head is not None and turned is None:
+        raise ValueError(f"no object named {head!r} for the head: the objects are {_names(bpy.data.objects)}")
 
     if target is None:
         objects = [o for o in scene.objects if arkit.arkit_keys(o)]
@@ -354,10 +365,19 @@ def _apply_weights(arkit, path: Path, clip: dict, target, scene) -> tuple[dict, 
                 raise ValueError(f"no object named {item!r}: the objects are {_names(bpy.data.objects)}")
             objects.append(obj)
     done = arkit.key_shapes(objects, clip, name=f"facegen ARKit {path.stem}")
+    warnings = []
+    if turned is not None and clip["head"] is not None:
+        arkit.key_head(turned, clip, name=f"facegen head {path.stem}")
+    elif turned is not None:
+        warnings.append(f"{path.name} has no head motion: {turned.name} was not keyed")
+    elif clip["head"] is not None:
+        warnings.append(f"{path.name} has head motion, left out: pass the head (or the character's root) as "
+                        "--head OBJECT to turn it")
     set_scene_fps(scene, clip["fps"])
     frames = math.ceil(float(clip["frames"][-1])) + 1
-    done.update(objects=[o.name for o in objects], fps=scene_fps(scene), frames=frames)
-    return done, {"audio": clip["audio"]}
+    done.update(objects=[o.name for o in objects], fps=scene_fps(scene), frames=frames,
+                head=turned.name if turned is not None and clip["head"] is not None else None)
+    return done, {"audio": clip["audio"], "warnings": warnings}
 
 
 def _names(objects) -> str:
@@ -462,6 +482,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--target", action="append", metavar="OBJECT",
                         help="the object whose ARKit-named shape keys get the weights (repeatable; default: "
                         "every object with such shape keys)")
+    parser.add_argument("--head", metavar="OBJECT", help="the object the head motion of ARKit weights turns "
+                        "(the head, or the character's root; about its origin)")
     parser.add_argument("--fps", type=float, help="frame rate, when the file does not state one")
     parser.add_argument("--audio", help="a WAV to use instead of the sidecar beside the file")
     parser.add_argument("--no-sound", action="store_true", help="add no sound strip")
@@ -478,7 +500,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.empty:
         bpy.ops.wm.read_factory_settings(use_empty=True)
     try:
-        done = _import(read, sound=not args.no_sound, scene=None, target=args.target)
+        done = _import(read, sound=not args.no_sound, scene=None, target=args.target, head=args.head)
     except (OSError, RuntimeError, ValueError) as exc:
         _fail(exc)
     for line in done["warnings"]:

@@ -70,8 +70,8 @@ CONTROLS: tuple[Control, ...] = (
         "/Face's xformOp:rotateZXY:head samples", "",
         glTF="node Head's rotation channel",
         NumPy="beside it: NAME.head.npy ([T, 3] yaw, pitch, roll degrees); the .npy stays face-local",
-        Audio2Face_JSON="the extra key facegenHead (read by examples/threejs; Audio2Face importers and "
-                        "facegen's Blender helper ignore it)",
+        Audio2Face_JSON="the extra key facegenHead (read by examples/threejs and facegen's Blender helper "
+                        "with `--head OBJECT`; Audio2Face importers ignore it)",
         Live_Link_Face_CSV="HeadYaw, HeadPitch, HeadRoll (radians)"),
         {"NumPy": Loss(lambda v: v != 0,
                        ".npy holds vertex positions only: {flag} {value} is written beside it, to {head} "
