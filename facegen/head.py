@@ -167,6 +167,16 @@ def rotations(angles: np.ndarray) -> np.ndarray:
     return ry @ rx @ rz
 
 
+def angles_of(turns: np.ndarray) -> np.ndarray:
+    """[T, 3] (yaw, pitch, roll) degrees of rotation matrices [T, 3, 3] (the inverse of `rotations`, pitch
+    within +-90 degrees), float32; e.g. a glTF Head node's rotation keys read back."""
+    m = np.asarray(turns, np.float64)
+    pitch = np.arcsin(np.clip(-m[:, 1, 2], -1.0, 1.0))  # Ry Rx Rz's row y: cos p sin r, cos p cos r, -sin p
+    yaw = np.arctan2(m[:, 0, 2], m[:, 2, 2])
+    roll = np.arctan2(m[:, 1, 0], m[:, 1, 1])
+    return np.degrees(np.stack([yaw, pitch, roll], 1)).astype(np.float32)
+
+
 def quaternions(angles: np.ndarray) -> np.ndarray:
     """[T, 4] unit quaternions (x, y, z, w; glTF's order) of `rotations(angles)`."""
     from scipy.spatial.transform import Rotation

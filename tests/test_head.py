@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import facegen
-from facegen.head import head_motion, quaternions, rotations
+from facegen.head import angles_of, head_motion, quaternions, rotations
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +63,12 @@ def test_rotations_and_quaternions_agree():
     assert (r[1] @ [0, 0, 1])[1] < 0  # a nod: the face looks down
     assert (r[2] @ [1, 0, 0])[1] > 0  # roll: the face's left side rises
     assert np.allclose(Rotation.from_quat(quaternions(angles)).as_matrix(), r, atol=1e-6)
+
+
+def test_angles_of_inverts_rotations():
+    angles = np.random.default_rng(5).uniform([-60, -80, -60], [60, 80, 60], (200, 3)).astype(np.float32)
+    np.testing.assert_allclose(angles_of(rotations(angles)), angles, atol=1e-4)
+    assert angles_of(np.eye(3)[None]).tolist() == [[0.0, 0.0, 0.0]]
 
 
 @pytest.fixture(scope="module")
@@ -122,6 +128,23 @@ def test_usd_and_gltf_carry_the_transform(animated, tmp_path):
     world = np.asarray(doc.nodes[head].translation) + r @ (np.asarray(doc.nodes[0].translation)
                                                            + scale * anim.vertices[frame, vertex])
     assert np.allclose(world, scale * _expected(anim, frame, vertex), atol=1e-5)
+
+
+@pytest.mark.parametrize("ext", [".usdc", ".glb"])
+def test_usd_and_gltf_read_back_the_head(animated, tmp_path, ext):
+    """`facegen render x.glb`, a read and a rewrite keep the head's turn: the readers give it back."""
+    from facegen.exchange import read_animation, write_animation
+
+    anim, still = animated
+    write_animation(anim, tmp_path / f"a{ext}")
+    back = read_animation(tmp_path / f"a{ext}")
+    assert back.head.shape == (anim.num_frames, 3)
+    np.testing.assert_allclose(back.head, anim.head, atol=1e-4)  # degrees (glTF: through quaternions)
+    np.testing.assert_allclose(back.head_pivot, anim.head_pivot, atol=1e-6)
+    write_animation(back, tmp_path / f"b{ext}")  # and again: the same turn
+    np.testing.assert_allclose(read_animation(tmp_path / f"b{ext}").head, anim.head, atol=2e-4)
+    write_animation(still, tmp_path / f"s{ext}")
+    assert read_animation(tmp_path / f"s{ext}").head is None
 
 
 def test_csv_json_and_npy_carry_the_angles(animated, tmp_path):
