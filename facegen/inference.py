@@ -272,8 +272,7 @@ class FrameStream:
     def blocks(self, block_frames: int | None = None, start: int = 0,
                stop: int | None = None, ahead: bool = False) -> Iterator[tuple[int, np.ndarray]]:
         """(first frame, frames [n, V, 3]) for consecutive blocks of `block_frames`; each array is new.
-        `ahead`: the next block is computed in a thread while the caller works on this one (numpy leaves the
-        GIL to the caller: a writer's own work overlaps it), two blocks held instead of one."""
+        `ahead`: the next block is computed in a thread (numpy frees the GIL) as the caller uses this one."""
         size = block_frames or self.block_frames
         stop = len(self) if stop is None else min(stop, len(self))
         starts = range(start, stop, size)

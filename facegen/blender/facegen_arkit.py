@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import math
 import os
 import re
 import stat
@@ -353,6 +354,47 @@ def key_head(obj, clip: dict, name: str = "facegen head") -> int:
         fcurve.keyframe_points.foreach_set("interpolation", linear)
         fcurve.update()
     return count
+
+
+def apply_weights(path: Path, clip: dict, target, scene, head=None) -> tuple[dict, dict]:
+    """Key an ARKit JSON/CSV's weights (read_weights) onto the shape keys of `target` (objects or names; None:
+    every object of `scene` with ARKit-named keys), its head motion onto `head` (key_head); (what was done:
+    key_shapes' result, objects, frames, head; {"audio", "warnings"}). facegen_import sets the scene's fps."""
+    import bpy
+
+    turned = bpy.data.objects.get(head) if isinstance(head, str) else head
+    if head is not None and turned is None:
+        raise ValueError(f"no object named {head!r} for the head: the objects are {_names(bpy.data.objects)}")
+    if target is None:
+        objects = [o for o in scene.objects if arkit_keys(o)]
+        if not objects:
+            raise ValueError(f"{path.name}: no object in the scene has shape keys named like ARKit's: "
+                             f"pass the character as target (objects: {_names(scene.objects)})")
+    else:
+        objects = []
+        for item in target if isinstance(target, list | tuple) else [target]:
+            obj = bpy.data.objects.get(item) if isinstance(item, str) else item
+            if obj is None:
+                raise ValueError(f"no object named {item!r}: the objects are {_names(bpy.data.objects)}")
+            objects.append(obj)
+    done = key_shapes(objects, clip, name=f"facegen ARKit {path.stem}")
+    warnings = []
+    if turned is not None and clip["head"] is not None:
+        key_head(turned, clip, name=f"facegen head {path.stem}")
+    elif turned is not None:
+        warnings.append(f"{path.name} has no head motion: {turned.name} was not keyed")
+    elif clip["head"] is not None:
+        warnings.append(f"{path.name} has head motion, left out: pass the head (or the character's root) as "
+                        "--head OBJECT to turn it")
+    frames = math.ceil(float(clip["frames"][-1])) + 1
+    done.update(objects=[o.name for o in objects], frames=frames,
+                head=turned.name if turned is not None and clip["head"] is not None else None)
+    return done, {"audio": clip["audio"], "warnings": warnings}
+
+
+def _names(objects) -> str:
+    names = sorted(o.name for o in objects)
+    return ", ".join(names) if names else "none"
 
 
 def _enum_value(item: str) -> int:

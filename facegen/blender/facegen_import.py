@@ -272,7 +272,9 @@ def _import(read: dict, *, sound: bool, scene, target, head=None) -> dict:
         raise ValueError(f"{path.name}: --head applies to ARKit weights (.json, .csv); a {path.suffix} file "
                          "carries the head's turn itself")
     if read["clip"] is not None:
-        done, info = _apply_weights(read["arkit"], path, read["clip"], target, scene, head)
+        done, info = read["arkit"].apply_weights(path, read["clip"], target, scene, head)
+        set_scene_fps(scene, read["clip"]["fps"])
+        done["fps"] = scene_fps(scene)
     else:
         done, info = _import_animation(path, fps, scene)
     scene.frame_start = 0
@@ -341,48 +343,6 @@ def _import_animation(path: Path, fps: float | None, scene) -> tuple[dict, dict]
     done = {"objects": [o.name for o in objects], "mesh": meshes[0].name if meshes else None,
             "fps": scene_fps(scene), "frames": frames}
     return done, info
-
-
-def _apply_weights(arkit, path: Path, clip: dict, target, scene, head=None) -> tuple[dict, dict]:
-    """Key an ARKit JSON/CSV's weights (read_weights) onto the target objects' shape keys at its rate, its
-    head motion onto `head`; (what was done, audio info and warnings)."""
-    import bpy
-
-    turned = bpy.data.objects.get(head) if isinstance(head, str) else head
-    if head is not None and turned is None:
-        raise ValueError(f"no object named {head!r} for the head: the objects are {_names(bpy.data.objects)}")
-
-    if target is None:
-        objects = [o for o in scene.objects if arkit.arkit_keys(o)]
-        if not objects:
-            raise ValueError(f"{path.name}: no object in the scene has shape keys named like ARKit's: "
-                             f"pass the character as target (objects: {_names(scene.objects)})")
-    else:
-        objects = []
-        for item in target if isinstance(target, list | tuple) else [target]:
-            obj = bpy.data.objects.get(item) if isinstance(item, str) else item
-            if obj is None:
-                raise ValueError(f"no object named {item!r}: the objects are {_names(bpy.data.objects)}")
-            objects.append(obj)
-    done = arkit.key_shapes(objects, clip, name=f"facegen ARKit {path.stem}")
-    warnings = []
-    if turned is not None and clip["head"] is not None:
-        arkit.key_head(turned, clip, name=f"facegen head {path.stem}")
-    elif turned is not None:
-        warnings.append(f"{path.name} has no head motion: {turned.name} was not keyed")
-    elif clip["head"] is not None:
-        warnings.append(f"{path.name} has head motion, left out: pass the head (or the character's root) as "
-                        "--head OBJECT to turn it")
-    set_scene_fps(scene, clip["fps"])
-    frames = math.ceil(float(clip["frames"][-1])) + 1
-    done.update(objects=[o.name for o in objects], fps=scene_fps(scene), frames=frames,
-                head=turned.name if turned is not None and clip["head"] is not None else None)
-    return done, {"audio": clip["audio"], "warnings": warnings}
-
-
-def _names(objects) -> str:
-    names = sorted(o.name for o in objects)
-    return ", ".join(names) if names else "none"
 
 
 def action_fcurves(action):

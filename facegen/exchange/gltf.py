@@ -57,6 +57,7 @@ from facegen.errors import FacegenError
 from facegen.exchange import mp3
 from facegen.exchange.formats import by_module
 from facegen.exchange.gltf_parts import add_parts, face_surface
+from facegen.exchange.head_read import gltf_head
 from facegen.exchange.morph_targets import normal_deltas, targets_as_written, writer_basis
 from facegen.exchange.pca import MorphBasis
 from facegen.exchange.surface import face_uvs
@@ -484,32 +485,8 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
         if data is not None:
             audio, sample_rate = mp3.decode(data)
     metadata = decoded["info"].get("metadata", {})
-    head, pivot = read_head(decoded, len(vertices))
+    head, pivot = gltf_head(decoded, len(vertices))
     return Animation.from_mesh(face, vertices, rate, audio=audio, sample_rate=sample_rate,
                                metadata=metadata if isinstance(metadata, dict) else {}, head=head,
                                head_pivot=pivot)
 
-
-def read_head(decoded: dict, frames: int) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """The head's motion as `build` writes it: the rotation keys of the node "Head" whose child is the face
-    node, as ([frames, 3] yaw, pitch, roll degrees, [3] pivot in mesh units), or (None, None) without one."""
-    from scipy.spatial.transform import Rotation
-
-    from facegen.head import angles_of
-
-    doc, face = decoded["file"].doc, decoded["node"]
-    head = next((i for i, n in enumerate(doc.nodes) if n.name == "Head" and face in (n.children or [])), None)
-    if head is None:
-        return None, None
-    keys = next(((anim.samplers[ch.sampler].input, anim.samplers[ch.sampler].output)
-                 for anim in doc.animations or [] for ch in anim.channels or []
-                 if ch.target.node == head and ch.target.path == "rotation"), None)
-    if keys is None:
-        return None, None
-    turns = decoded["file"].accessor(keys[1]).astype(np.float64).reshape(-1, 4)
-    if len(turns) != frames:
-        raise FacegenError(f"{decoded['file'].path}: the Head node has {len(turns)} rotation keys for "
-                           f"{frames} frames: the file is broken")
-    scale = float((decoded["scale"] or [1.0])[0])
-    pivot = np.asarray(doc.nodes[head].translation or [0.0, 0.0, 0.0], np.float64) / scale
-    return angles_of(Rotation.from_quat(turns).as_matrix()), pivot.astype(np.float32)

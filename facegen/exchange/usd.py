@@ -53,6 +53,7 @@ from facegen.audio import load_audio
 from facegen.errors import FacegenError
 from facegen.exchange import usd_clips, usd_skel
 from facegen.exchange.formats import by_module
+from facegen.exchange.head_read import usd_head
 from facegen.exchange.morph_targets import targets_as_written, writer_basis
 from facegen.exchange.surface import MATERIAL_NAME, SKIN_COLOR, SKIN_METALLIC, SKIN_ROUGHNESS, face_uvs
 from facegen.exchange.usd_parts import author_parts
@@ -486,18 +487,7 @@ def read(path: str | os.PathLike, template: Mesh | None = None, fps: float | Non
         audio, sample_rate = read_audio_asset(resolved)
     info = stage.GetRootLayer().customLayerData.get("facegen", {})
     metadata = python_value(info.get("metadata", {})) if isinstance(info, dict) else {}
-    head, pivot = read_head(stage, len(vertices))
+    head, pivot = usd_head(stage.GetPrimAtPath(ROOT_PATH), len(vertices))
     return Animation.from_mesh(face, vertices, rate, audio=audio, sample_rate=sample_rate, metadata=metadata,
                                head=head, head_pivot=pivot)
 
-
-def read_head(stage, frames: int) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """The head's motion as _author_head writes it on /Face: ([frames, 3] yaw, pitch, roll degrees at the
-    frames' time codes, [3] pivot), or (None, None) for a still head."""
-    root = stage.GetPrimAtPath(ROOT_PATH)
-    turn = root.GetAttribute("xformOp:rotateZXY:head") if root else None
-    move = root.GetAttribute("xformOp:translate:pivot") if root else None
-    if not turn or not move or not turn.GetNumTimeSamples():
-        return None, None
-    values = np.array([turn.Get(float(t)) for t in range(frames)], np.float32)  # (pitch, yaw, roll)
-    return values[:, [1, 0, 2]], np.array(move.Get(), np.float32)
