@@ -1,17 +1,20 @@
-"""Forced alignment started ahead, in a process of its own, while the caller imports torch and loads the
-model.
+"""Forced alignment started ahead, in a process of its own, while the caller loads the model and the text
+model and computes the clip's features.
 
-A new `facegen animate` spends its first second or more importing torch and loading the bundle, and as long
-again aligning the transcript: pocketsphinx holds the GIL, so a thread cannot overlap the two, but a forked
-process can, on the second core. `start` forks before torch is imported (the child never touches torch, so
-the fork is safe) and returns an `AlignAhead` whose `result()` gives what `align.align_checked`
-would have given in this process (the same code on the same audio: the same words and phones), or raises
-their FacegenError. A child that dies without an answer (killed, a bug) makes `result()` return None: the
-caller aligns in its own process, where any error shows as usual.
+A new `facegen animate` spends a few tenths of a second loading the bundle and the text model and computing
+the clip's mel and word features, and as long again or longer aligning the transcript (a minute of speech:
+3-4 s): pocketsphinx holds the GIL, so a thread cannot overlap the two, but a forked process can, on the
+second core. `start` forks only where that is safe (no other Python thread, torch not imported: its OpenMP
+pool does not survive a fork; facegen's CPU inference never imports it) and returns an `AlignAhead` whose
+`result()` gives what `align.align_checked` would have given in this process (the same code on the same
+audio: the same words and phones), or raises their FacegenError. A child that dies without an answer
+(killed, a bug) makes `result()` return None: the caller aligns in its own process, where any error shows as
+usual.
 
 `start` returns None, and the caller aligns in-process as before, where overlapping gains nothing or is not
-safe: torch already imported (a second call in a process, a batch worker), other threads running, no `fork`
-(Windows, macOS defaults), or a single core.
+safe: torch imported (a script that uses it, a CUDA run), other threads running, no `fork` (Windows, macOS
+defaults), or a single core. The Animator asks only before its model is loaded (not in a batch worker,
+whose model is loaded once for all its clips).
 
 `align_file` aligns in the calling process and returns an `Aligned`, which answers `result()` the same way:
 a batch's main process aligns waiting items with it while its workers start (engines.run_local).

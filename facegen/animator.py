@@ -8,9 +8,9 @@ plots all go through it:
     [animation] = animator.run([clip])                 # the network (packed over many clips)
     animation = animator.animate("line.wav", text="...")   # both in one call
 
-Alignment started ahead: in a process that has not imported torch yet (a new `facegen animate`, a script's
-first call), the forced alignment of the transcript runs in a forked process while this one imports torch and
-loads the model (align_ahead.py): the same words, sooner. `animate` does this by itself; a caller with work of
+Alignment started ahead: before the model is loaded (a new `facegen animate`, a script's first call), the
+forced alignment of the transcript runs in a forked process while this one loads the model and computes the
+clip's features (align_ahead.py): the same words, sooner. `animate` does this by itself; a caller with work of
 its own to do first (the CLI checks the template's rig) calls `align_ahead` early and `animate` later.
 """
 
@@ -30,7 +30,7 @@ from facegen.blinks import DEFAULT_RATE, check_blink_rate, check_seed
 from facegen.errors import FacegenError
 from facegen.expression import Emotion, parse_emotion
 from facegen.face.mesh import Mesh, check_topology, read_mesh
-from facegen.runtime import PROFILE, SILENT, Reporter, select_device, silent
+from facegen.runtime import PROFILE, SILENT, Reporter, inference_device, silent
 from facegen.transcript_match import Match
 from facegen.word_timing import NONE, Timing, clip_words, clip_words_and_phones, force_aligned
 
@@ -103,9 +103,10 @@ class Animator:
 
     @property
     def device(self):
-        """The torch device (chosen on first use: that imports torch)."""
+        """Where the network runs: "cpu" (numpy, torch not imported) or a CUDA torch.device (chosen on first
+        use: facegen.runtime.inference_device)."""
         if self._device is None:
-            self._device = select_device(self._device_name)
+            self._device = inference_device(self._device_name)
         return self._device
 
     @property
@@ -153,7 +154,7 @@ class Animator:
     def align_ahead(self, audio, *, text: str | None, alignment=None, no_text: bool = False,
                     language: str = "en") -> None:
         """Start the forced alignment of `text` to the audio file `audio` in a process of its own, when the
-        clip will be force-aligned and the model is not loaded yet (torch not imported: align_ahead.py);
+        clip will be force-aligned and the model is not loaded yet (where forking is safe: align_ahead.py);
         `prepare` of the same clip takes its answer. Does nothing where that gains nothing."""
         if self._ahead is not None or self._bundle is not None:
             return

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -35,20 +34,57 @@ FORMAT_VERSION = 1
 DEFAULT_BUNDLE = "default.safetensors"
 
 
-@dataclass
 class Bundle:
-    model: FaceModel
-    features: FeatureConfig
-    mel_filters: np.ndarray
-    text_backend: str  # id for facegen.text.load_text_backend, or "none"
-    speakers: list[str]
-    template: Mesh
-    provenance: dict = field(default_factory=dict)
-    path: Path | None = None
+    """A loaded model: the network, its features' configuration, mel filters, text backend id, speakers, the
+    template face, provenance.
+
+    The network is held two ways, each made from the other when first asked for: `weights`, its float32
+    state dict as numpy arrays with the plain FC 3V output layer (what inference on the CPU reads:
+    facegen.numpy_network, no torch), and `model`, the torch FaceModel (training, a CUDA device). A loaded
+    bundle has weights and builds the torch model only if asked (importing torch); a bundle made from a
+    torch model (training, tests) reads its weights from that model each time, so they follow its changes.
+    """
+
+    def __init__(self, model: FaceModel | None = None, *, features: FeatureConfig, mel_filters: np.ndarray,
+                 text_backend: str, speakers: list[str], template: Mesh, provenance: dict | None = None,
+                 path: Path | None = None, weights: dict[str, np.ndarray] | None = None,
+                 config: ModelConfig | None = None) -> None:
+        if (model is None) == (weights is None) or (weights is not None and config is None):
+            raise ValueError("a Bundle needs a torch model, or weights and their config")
+        self._model, self._weights, self._config = model, weights, config
+        self.features = features
+        self.mel_filters = mel_filters
+        self.text_backend = text_backend  # id for facegen.text.load_text_backend, or "none"
+        self.speakers = speakers
+        self.template = template
+        self.provenance = {} if provenance is None else provenance
+        self.path = path
+
+    @property
+    def model(self) -> FaceModel:
+        """The torch network (built from the weights on first use: that imports torch)."""
+        if self._model is None:
+            import torch
+
+            from facegen.model import FaceModel
+
+            with torch.device("meta"):  # no storage, no random init: the weights are assigned below
+                model = FaceModel(self._config)
+            model.load_state_dict({k: torch.from_numpy(v) for k, v in self._weights.items()}, assign=True)
+            self._model = model.eval()
+        return self._model
+
+    @property
+    def weights(self) -> dict[str, np.ndarray]:
+        """The network's float32 state dict, output layer as the plain FC 3V (FaceModel.folded)."""
+        if self._weights is not None:
+            return self._weights
+        model = self._model.folded()
+        return {k: v.detach().cpu().float().numpy() for k, v in model.state_dict().items()}
 
     @property
     def config(self) -> ModelConfig:
-        return self.model.cfg
+        return self._model.cfg if self._model is not None else self._config
 
     @property
     def fingerprint(self) -> str:
@@ -106,16 +142,17 @@ def _compress(name: str, v: torch.Tensor, precision: str) -> dict[str, torch.Ten
     return {name: v.half()}
 
 
-def _decompress(tensors: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+def _decompress(tensors: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Stored tensors as float32 (int8 matrices times their row scales); integer tensors as they are."""
     out = {}
     for k, v in tensors.items():
         if k.endswith(".__scale__"):
             continue
         scale = tensors.get(f"{k}.__scale__")
         if scale is not None:
-            out[k] = v.float() * scale[:, None]
+            out[k] = v.astype(np.float32) * scale[:, None]
         else:
-            out[k] = v.float() if v.is_floating_point() else v
+            out[k] = v.astype(np.float32) if v.dtype.kind == "f" else v
     return out
 
 
@@ -128,10 +165,9 @@ def save_bundle(bundle: Bundle, path: str | os.PathLike, precision: str = "fp32"
 
     if precision not in PRECISIONS:
         raise FacegenError(f"unknown precision {precision!r}: use one of {', '.join(PRECISIONS)}")
-    if bundle.model.cfg.output_basis:  # stored as the paper's plain FC 3V (facegen.model: folded)
-        bundle = replace(bundle, model=bundle.model.folded())
+    model = bundle.model.folded()  # stored as the paper's plain FC 3V (facegen.model)
     tensors: dict[str, torch.Tensor] = {}
-    for k, v in bundle.model.state_dict().items():
+    for k, v in model.state_dict().items():
         tensors.update(_compress(f"model.{k}", v.detach().cpu().contiguous(), precision))
     tensors["template.vertices"] = torch.from_numpy(np.ascontiguousarray(bundle.template.vertices,
                                                                          np.float32))
@@ -140,7 +176,8 @@ def save_bundle(bundle: Bundle, path: str | os.PathLike, precision: str = "fp32"
         tensors[f"region.{name}"] = torch.from_numpy(np.ascontiguousarray(idx, np.int64))
     tensors["audio.mel_filters"] = torch.from_numpy(np.ascontiguousarray(bundle.mel_filters, np.float32))
     with atomic_path(path) as tmp:
-        save_file(tensors, str(tmp), metadata={"facegen": json.dumps(bundle.with_precision_note(precision))})
+        meta = {**bundle.with_precision_note(precision), "model_config": model.cfg.to_dict()}  # folded
+        save_file(tensors, str(tmp), metadata={"facegen": json.dumps(meta)})
 
 
 def default_bundle_path() -> Path:
@@ -207,11 +244,12 @@ def read_template(path: str | os.PathLike | None = None) -> Mesh:
 
 
 def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
-    """Load a bundle (the built-in default model when `path` is None)."""
-    import torch
-    from safetensors.torch import load_file
+    """Load a bundle (the built-in default model when `path` is None), without torch (`Bundle.model` imports
+    it when asked for)."""
+    from safetensors.numpy import load_file
 
-    from facegen.model import FaceModel, ModelConfig
+    from facegen.model_config import ModelConfig
+    from facegen.numpy_network import check_weights
 
     if path is None:
         path = default_bundle_path()
@@ -229,28 +267,27 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
                            "it") from exc
     try:
         cfg = ModelConfig.from_dict(meta["model_config"])
-        with torch.device("meta"):  # no storage, no random init: the weights are assigned below (0.1 s less)
-            model = FaceModel(cfg)
-        state = {k[len("model."):]: v for k, v in _decompress(tensors).items() if k.startswith("model.")}
-        # a sum is NaN/inf when any weight is (20x cheaper than isfinite().all() on the start-up path)
-        broken = sorted(k for k, v in state.items()
-                        if v.is_floating_point() and not torch.isfinite(torch.sum(v, dtype=torch.float64)))
+        weights = {k[len("model."):]: v for k, v in _decompress(tensors).items() if k.startswith("model.")}
+        # a sum is NaN/inf when any weight is (cheaper than isfinite().all() on the start-up path)
+        broken = sorted(k for k, v in weights.items()
+                        if v.dtype.kind == "f" and not np.isfinite(np.sum(v, dtype=np.float64)))
         if broken:
             raise FacegenError(f"model bundle {path} has NaN or infinite weights ({', '.join(broken[:3])}"
                                f"{' ...' if len(broken) > 3 else ''}): re-train it (a lower learning rate) "
                                "or re-export it")
-        model.load_state_dict(state, assign=True)
-        regions = {k[len("region."):]: v.numpy() for k, v in tensors.items() if k.startswith("region.")}
-        template = Mesh(tensors["template.vertices"].numpy(), tensors["template.faces"].numpy(), regions)
+        check_weights(weights, cfg)
+        regions = {k[len("region."):]: v for k, v in tensors.items() if k.startswith("region.")}
+        template = Mesh(tensors["template.vertices"], tensors["template.faces"], regions)
         features = FeatureConfig.from_dict(meta["feature_config"])
         try:
             features.hop_length  # noqa: B018 (refuses an fps that does not divide the sample rate)
         except FacegenError as exc:
             raise FacegenError(f"model bundle {path} is unusable ({exc}): re-train or re-export it") from None
         bundle = Bundle(
-            model=model.eval(),
+            weights=weights,
+            config=cfg,
             features=features,
-            mel_filters=tensors["audio.mel_filters"].numpy(),
+            mel_filters=tensors["audio.mel_filters"],
             text_backend=meta["text_backend"]["id"],
             speakers=list(meta["speakers"]),
             template=template,

@@ -2,8 +2,8 @@
 
 Both engines run the same code on the same chunks of Jobs: a worker loads the model bundle and text model
 once (`Worker`), then animates, writes and validates chunk after chunk (`facegen.batch.run_batch`), so the
-two give the same files. The local engine is a process pool whose initializer builds the worker (one torch
-thread per core it owns); the Ray engine runs one actor per worker on an existing cluster (`--ray-address`)
+two give the same files. The local engine is a process pool whose initializer builds the worker (one thread
+per pool per core it owns); the Ray engine runs one actor per worker on an existing cluster (`--ray-address`)
 or on a local instance it starts, writing to the same output paths (on a cluster: a shared file system
 mounted at the same path on every node). Ray is an optional extra: `pip install 'facegen[ray]'`.
 """
@@ -24,12 +24,12 @@ from facegen.processes import ProcessPool, process_pool
 from facegen.runtime import cores, set_threads
 
 ENGINES = ("local", "ray")
-# What the local engine's worker processes import before they are forked (once, not in every worker): torch,
-# USD, pocketsphinx and the aligner's decoders (worker_preload), the text model's code and the pipeline around
-# them.
-# Nothing here may start threads (torch and USD start theirs on first use, not on import).
-PRELOAD = ["torch", *USD_LIBRARIES, "pocketsphinx",
-           "safetensors.torch", "tokenizers", "facegen.engines", "facegen.animator", "facegen.worker_preload",
+# What the local engine's worker processes import before they are forked (once, not in every worker): USD,
+# pocketsphinx and the aligner's decoders (worker_preload), the network and the text model's code (numpy:
+# torch is imported only by a worker on a CUDA device) and the pipeline around them.
+# Nothing here may start threads (USD starts its on first use, not on import).
+PRELOAD = [*USD_LIBRARIES, "pocketsphinx", "safetensors.numpy", "tokenizers", "facegen.engines",
+           "facegen.animator", "facegen.worker_preload", "facegen.inference", "facegen.numpy_network",
            "facegen.minilm", "facegen.text", "facegen.exchange.usd", "facegen.validate"]
 OnResult = Callable[[JobResult], None]
 
@@ -50,12 +50,12 @@ class Worker:
 
 
 def limit_threads(threads: int) -> None:
-    """At most `threads` threads in each pool this process computes with: torch's, the BLAS and OpenMP pools
-    and USD's (runtime.set_threads). With a worker per core, a second thread only spins: 20 clips in one
-    process took the same wall time with one thread per pool and 21 % less CPU (14.0 -> 11.0 s), which the
-    other worker gets."""
-    import torch  # noqa: F401 - imported now, so that its pool is limited too
-    from pxr import Work  # noqa: F401 - likewise
+    """At most `threads` threads in each pool this process computes with: the BLAS and OpenMP pools, USD's,
+    and torch's if it is imported by then (runtime.set_threads; a worker on the CPU runs the network in numpy
+    and never imports torch; one on a CUDA device imports it later and computes on the GPU). With a worker
+    per core, a second thread only spins: 20 clips in one process took the same wall time with one thread per
+    pool and 21 % less CPU (14.0 -> 11.0 s), which the other worker gets."""
+    from pxr import Work  # noqa: F401 - imported now, so that its pool is limited too
 
     set_threads(threads)
 
@@ -93,9 +93,9 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
     run redoes only them).
 
     The chunks go to the workers as they become free; meanwhile this process force-aligns the items of the
-    last waiting chunks (align_ahead.align_file, the same words and phones a worker would find). It imports no
-    torch, so it starts at once, while the workers import torch and load the model: a core that would idle
-    for the first second or two aligns instead (20 clips on 2 cores: see docs/scale.md)."""
+    last waiting chunks (align_ahead.align_file, the same words and phones a worker would find). It starts at
+    once, while the workers import their modules and load the model: a core that would idle for the first
+    second aligns instead (20 clips on 2 cores: see docs/scale.md)."""
     threads = max(1, cores() // workers)
     if workers == 1:
         worker = Worker(model, device, text_model, threads)
@@ -108,7 +108,7 @@ def run_local(jobs: Sequence[Job], *, workers: int, model: str | None, device: s
     queue = chunks(jobs, workers, batch_size)
     to_align = _alignable(queue, model)
     pending: dict = {}
-    # The first submissions start the workers, which waits until the forkserver has imported torch: they are
+    # The first submissions start the workers, which waits until the forkserver has imported PRELOAD: they are
     # made from a thread, and this one aligns meanwhile. `sent`: the chunks of `queue` submitted so far.
     sent = min(workers + 1, len(queue))
     failed: list[BaseException] = []

@@ -8,7 +8,9 @@ features and 256 decoder states, but outputs 3V = 70,110 numbers. A 10-minute cl
    clip at once, exactly as in one pass; the only wide step, tensor fusion + the decoder's first FC, runs
    in blocks of frames. Memory O(T x 256), time linear in T. Overlapping windows for the recurrences are
    not needed: their state is this small, and a whole-clip pass has no seams at all (block-wise output
-   equals one pass to float rounding, ~1e-7 of the face size; tests/test_inference.py).
+   equals one pass to float rounding, ~1e-7 of the face size; tests/test_inference.py). On the CPU this is
+   facegen.numpy_network (numpy: torch's import would cost more than the whole inference of a short
+   clip); on a CUDA device facegen.torch_states (the torch network, clips packed into one batch).
 2. `FrameStream`: the output layer, frames = states @ W.T + (bias + template), computed block by block
    when a writer asks for frames (`blocks()`, indexing) into float32 arrays, with the template added in
    the same pass. Memory: one block (512 frames = 144 MB) at a time.
@@ -24,26 +26,15 @@ each saved and released; a single USD layer keeps every authored sample until it
 
 from __future__ import annotations
 
-import contextlib
 import weakref
 from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from facegen.runtime import release_memory, threads
-
 BLOCK_FRAMES = 512  # frames per output block (512 x 70,110 float32 = 144 MB; 256: 8% slower)
 FUSION_FRAMES = 1024  # frames per block of tensor fusion + decoder FC (1024 x 8,385 float32 = 34 MB)
 LAYER_FRAMES = 64  # frames a block's layers are added to at a time (64 x 70,110 float32 = 18 MB)
 TURN_FRAMES = 512  # frames of eyeball points turned at a time in `project` (512 x 1,042 x 3 float64 = 13 MB)
-LONG_FRAMES = 4096  # a longer clip runs the network this many frames at a time (`_long_states`)
-
-
-def _model_on(bundle, device):
-    model = bundle.model
-    if next(model.parameters()).device != device:
-        model.to(device)
-    return model
 
 
 # --------------------------------------------------------------------------------------------------
@@ -52,7 +43,7 @@ def _model_on(bundle, device):
 
 def decoder_states(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: int, *, device=None,
                    fusion_frames: int = FUSION_FRAMES, phones: np.ndarray | None = None):
-    """The decoder BiLSTM's states for one clip, [T, 2 * lstm_dim] float32 torch tensor on `device`.
+    """The decoder BiLSTM's states for one clip, [T, 2 * lstm_dim] float32 (see batch_decoder_states).
 
     `mel` [T, n_mels], `text` [T, text_dim] or None (zeros when the model uses text), `phones` [T, P] one-hot
     (models with a phone stream; None: silence). Equal to the states of a one-pass forward: only the
@@ -64,134 +55,45 @@ def decoder_states(bundle, mel: np.ndarray, text: np.ndarray | None, speaker: in
 
 def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None,
                          fusion_frames: int = FUSION_FRAMES) -> list:
-    """Decoder states for several clips (mel, text, speaker[, phones]): encoders per clip, the BiLSTMs over
-    one packed batch (each clip sees exactly its own frames, as alone). Returns one [T_i, H] tensor per
-    clip."""
-    import torch
-    from torch.nn.utils.rnn import pack_sequence, unpack_sequence
+    """Decoder states for several clips (mel, text, speaker[, phones]), each as if alone: float32 arrays
+    [T_i, H] on the CPU (`device` None or "cpu": facegen.numpy_network, torch is not imported), tensors on a
+    torch `device` (a torch.device, even the CPU's: facegen.torch_states, the clips' BiLSTMs packed)."""
+    cfg = bundle.config
+    clips = [(mel, text, speaker, _phones_of(cfg, mel, text, rest[0] if rest else None))
+             for mel, text, speaker, *rest in clips]
+    if device is None or device == "cpu":
+        from facegen.numpy_network import decoder_states as states_of
 
-    device = torch.device("cpu") if device is None else torch.device(device)
-    model = _model_on(bundle, device)
-    cfg = model.cfg
-    states: list = [None] * len(clips)
-    inputs, packed = [], []
-    with torch.inference_mode(), _one_thread(device.type == "cpu"):
-        for i, (mel, text, speaker, *rest) in enumerate(clips):
-            T = int(mel.shape[0])
-            phones = None
-            if cfg.n_phones:
-                if rest and rest[0] is not None:
-                    phones = rest[0]
-                else:
-                    from facegen.phonetics import silence
+        return [states_of(bundle.weights, cfg, mel, text, speaker, phones, fusion_frames)
+                for mel, text, speaker, phones in clips]
+    from facegen.torch_states import batch_states
 
-                    phones = silence(T)
-                if phones.shape != (T, cfg.n_phones):
-                    raise ValueError(f"phones must be [{T}, {cfg.n_phones}], got {list(phones.shape)}")
-            if cfg.uses_text and text is not None and text.shape != (T, cfg.text_dim):
-                raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
-            spk = model.speaker_one_hot(speaker).to(device)
-            if T > LONG_FRAMES:
-                states[i] = _long_states(model, mel, text, spk, phones, fusion_frames)
-                continue
-            text_t = phones_t = None
-            if cfg.n_phones:
-                phones_t = _tensor(phones, device)
-            mel_t = _tensor(mel, device)
-            if cfg.uses_text:
-                text_t = _tensor(np.zeros((T, cfg.text_dim), np.float32) if text is None else text, device)
-            inputs.append(model.decoder_input(mel_t, text_t, spk, block_frames=fusion_frames,
-                                              phones=phones_t)[0])
-            packed.append(i)
-        if len(inputs) == 1:
-            states[packed[0]] = model.decoder_states(inputs[0][None])[0]
-        elif inputs:
-            found = unpack_sequence(model.decoder_states(pack_sequence(inputs, enforce_sorted=False)))
-            for i, clip_states in zip(packed, found, strict=True):
-                states[i] = clip_states
-        return states
+    return batch_states(bundle, clips, device, fusion_frames)
 
 
-def _tensor(array: np.ndarray, device):
-    """A [1, T, D] float32 tensor of a [T, D] array on `device` (a view on the CPU)."""
-    import torch
+def _phones_of(cfg, mel: np.ndarray, text: np.ndarray | None, phones: np.ndarray | None) -> np.ndarray | None:
+    """A clip's inputs checked against the model: its phones (silence when the model takes them and none are
+    given; None when it does not), ValueError for a wrong shape."""
+    T = int(mel.shape[0])
+    if cfg.uses_text and text is not None and text.shape != (T, cfg.text_dim):
+        raise ValueError(f"text features must be [{T}, {cfg.text_dim}], got {list(text.shape)}")
+    if not cfg.n_phones:
+        return None
+    if phones is None:
+        from facegen.phonetics import silence
 
-    return torch.from_numpy(np.ascontiguousarray(array, np.float32))[None].to(device)
-
-
-def _long_states(model, mel: np.ndarray, text: np.ndarray | None, spk, phones: np.ndarray | None,
-                 fusion_frames: int):
-    """The decoder states of a clip longer than LONG_FRAMES, computed LONG_FRAMES frames at a time: each
-    call into torch is short (a signal can stop the run between them) and nothing of the length of the clip
-    exists but the decoder's input and two layers of its states. The same network: the convolutions see
-    their receptive field past each piece's edges; the LSTMs carry their state from piece to piece (the
-    backward directions from the end of the clip back); equal to one pass to float rounding
-    (tests/test_long_audio.py)."""
-    import torch
-
-    cfg, device = model.cfg, spk.device
-    T, step, halo = len(mel), LONG_FRAMES, cfg.receptive_field
-    x = torch.empty(T, cfg.decoder_dim, device=device)
-    text_state = None
-    for s in range(0, T, step):
-        e = min(s + step, T)
-        enc = {}
-        if model.audio is not None:
-            a, b = max(0, s - halo), min(T, e + halo)
-            mel_t = (_tensor(mel[a:b], device) - model.mel_mean) / model.mel_std
-            phones_t = _tensor(phones[a:b], device) if phones is not None else None
-            enc["audio"] = model.audio(mel_t, spk, phones_t)[:, s - a:e - a]
-        if model.text is not None:
-            words = np.zeros((e - s, cfg.text_dim), np.float32) if text is None else text[s:e]
-            hidden = model.text.fc2(model.text.act(model.text.fc1(_tensor(words, device))))
-            enc["text"], text_state = model.text.lstm(hidden, text_state)
-        for f in range(0, e - s, fusion_frames):
-            part = {k: v[:, f:f + fusion_frames] for k, v in enc.items()}
-            x[s + f:s + f + fusion_frames] = model.act(model.fc_in(model.fuse(part, spk)))[0]
-    for layer in range(cfg.lstm_layers):
-        x = _bidirectional(model, layer, x, step)
-    release_memory()  # the pieces' blocks, freed: while the frames are written the heap holds no holes
-    return x
+        phones = silence(T)
+    if phones.shape != (T, cfg.n_phones):
+        raise ValueError(f"phones must be [{T}, {cfg.n_phones}], got {list(phones.shape)}")
+    return phones
 
 
-def _bidirectional(model, layer: int, x, step: int):
-    """One layer of the decoder BiLSTM over x [T, D], `step` frames at a time: [T, 2 * lstm_dim]. The forward
-    direction runs first; the backward direction then walks from the end, and a piece of x it has read is
-    needed no more, so where x is as wide as the output (every layer after the first) the output is written
-    into x's own memory, the forward direction kept in a buffer of half its width until then. At most 1.5
-    times the output's size is held (2 hours: 276 MB, not 460)."""
-    import torch
+def _is_tensor(x) -> bool:
+    """Whether x is a torch tensor (without importing torch: nothing made one if it is not imported)."""
+    import sys
 
-    H, T = model.cfg.lstm_dim, len(x)
-
-    def lstm_of(suffix: str):
-        lstm = torch.nn.LSTM(x.shape[1], H, batch_first=True).to(x.device)
-        for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
-            getattr(lstm, f"{name}_l0").copy_(getattr(model.lstm, f"{name}_l{layer}{suffix}"))
-        return lstm
-
-    in_place = x.shape[1] == 2 * H
-    out = x if in_place else torch.empty(T, 2 * H, device=x.device)
-    forward = torch.empty(T, H, device=x.device) if in_place else out[:, :H]
-    lstm, state = lstm_of(""), None
-    for s in range(0, T, step):
-        y, state = lstm(x[s:s + step][None], state)
-        forward[s:s + step] = y[0]
-    lstm, state = lstm_of("_reverse"), None
-    for s in reversed(range(0, T, step)):
-        y, state = lstm(x[s:s + step].flip(0)[None], state)
-        out[s:s + step, H:] = y[0].flip(0)  # rows s.. of x are read: this piece's output may replace them
-        if in_place:
-            out[s:s + step, :H] = forward[s:s + step]
-    return out
-
-
-def _one_thread(enabled: bool) -> contextlib.AbstractContextManager:
-    """One torch thread for the decoder states: thousands of small sequential LSTM steps gain little from
-    a second thread (0.095 s vs 0.11-0.13 s for 1500 frames, idle 2-core EPYC) but lose 4-6x when its
-    OpenMP threads sleep between steps (OMP_WAIT_POLICY=PASSIVE) or the cores are busy. The output
-    layer, where the work is, runs on numpy's BLAS threads, which this does not touch."""
-    return threads(1 if enabled else None, ("torch",))
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(x, torch.Tensor)
 
 
 class FrameStream:
@@ -208,20 +110,20 @@ class FrameStream:
 
     def __init__(self, states, weight, base: np.ndarray, block_frames: int = BLOCK_FRAMES,
                  turns=None, layers: tuple[np.ndarray, np.ndarray] | None = None) -> None:
-        import torch
-
         self.turns = turns  # facegen.gaze.EyeTurns: the eyeballs turned after the affine output, or None
         self.scale = None  # (per-coordinate scales [3V], origin [3V]) of the network's motion, or None
         self.layers = layers  # (curves [T, K], offsets [K, 3V]) float32 added to the frames, or None
-        self._torch = isinstance(states, torch.Tensor) and states.device.type != "cpu"
+        self._torch = _is_tensor(states) and states.device.type != "cpu"
         if self._torch:
+            import torch
+
             self._states = states.float()
-            self._weight = weight.detach().float()
+            self._weight = torch.as_tensor(weight, device=states.device).float()
             self._base = torch.as_tensor(base.reshape(-1), device=states.device)
         else:
-            states = states.detach().cpu().numpy() if isinstance(states, torch.Tensor) else states
+            states = states.detach().cpu().numpy() if _is_tensor(states) else states
             self._states = np.ascontiguousarray(states, np.float32)
-            w = weight.detach().cpu().numpy() if isinstance(weight, torch.Tensor) else weight
+            w = weight.detach().cpu().numpy() if _is_tensor(weight) else weight
             self._weight = np.asarray(w, np.float32)
             self._base = np.ascontiguousarray(base, np.float32).reshape(-1)
         self.num_vertices = int(self._base.shape[0]) // 3
@@ -454,7 +356,7 @@ def states_at_rate(states, fps_in: float, fps_out: float, frames: int):
 
 REST_SECONDS = 3.0  # of quiet noise: the network's answer to silence (`rest_offsets`)
 REST_DBFS = -50.0  # a quiet room (the network answers -60 to -30 dBFS alike; digital silence not)
-_REST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # model -> {speaker: offsets}
+_REST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # bundle -> {speaker: offsets}
 
 
 def rest_offsets(bundle, speaker: int = 0) -> np.ndarray:
@@ -466,17 +368,16 @@ def rest_offsets(bundle, speaker: int = 0) -> np.ndarray:
     is the template in every format, as an idle clip is. Computed once per model and speaker (~20 ms)."""
     from facegen.audio import mel_features
 
-    cached = _REST.setdefault(bundle.model, {})
+    cached = _REST.setdefault(bundle, {})
     if speaker not in cached:
         cfg = bundle.features
         noise = np.random.default_rng(0).standard_normal(int(REST_SECONDS * cfg.sample_rate))
         mel = mel_features((noise * 10 ** (REST_DBFS / 20)).astype(np.float32), cfg.sample_rate, cfg,
                            bundle.mel_filters)
-        states = decoder_states(bundle, mel, None, speaker).float().cpu().numpy()
-        weight, bias = bundle.model.output_layer()
+        states = decoder_states(bundle, mel, None, speaker)
+        weights = bundle.weights
         middle = states[len(states) // 3: 2 * len(states) // 3].mean(0)  # away from the clip's edges
-        cached[speaker] = (weight.detach().cpu().float().numpy() @ middle
-                           + bias.detach().cpu().float().numpy()).astype(np.float32)
+        cached[speaker] = (weights["fc_out.weight"] @ middle + weights["fc_out.bias"]).astype(np.float32)
     return cached[speaker]
 
 
@@ -484,8 +385,9 @@ def frame_stream(bundle, states, template: np.ndarray | None = None,
                  block_frames: int = BLOCK_FRAMES, *, speaker: int = 0) -> FrameStream:
     """Frames = template + offsets from decoder `states` (template None: offsets only), the offsets taken
     from the network's rest for `speaker` (`rest_offsets`)."""
-    weight, bias = bundle.model.output_layer()
-    base = bias.detach().cpu().numpy().astype(np.float32) - rest_offsets(bundle, speaker)
+    weights = bundle.weights
+    weight, bias = weights["fc_out.weight"], weights["fc_out.bias"]
+    base = bias - rest_offsets(bundle, speaker)
     if template is not None:
         base = base + np.asarray(template, np.float32).reshape(-1)
     return FrameStream(states, weight, base, block_frames)

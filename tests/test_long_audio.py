@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from facegen import audio, inference
+from facegen import audio, inference, torch_states
 from facegen.arkit import solve
 from facegen.atomic import TEMP_MARK
 
@@ -50,27 +50,35 @@ def speech(tmp_path_factory) -> tuple[Path, Path, float]:
 
 
 def test_network_in_pieces_equals_one_pass():
+    """torch's network (a CUDA device's path, here on the CPU) in LONG_FRAMES pieces equals its one pass, and
+    the numpy network (the CPU's) equals both."""
+    import torch
+
     from facegen.bundle import load_bundle
 
+    cpu = torch.device("cpu")
     bundle = load_bundle(None)
     cfg = bundle.model.cfg
-    T = 2 * inference.LONG_FRAMES + 1234
+    T = 2 * torch_states.LONG_FRAMES + 1234
     rng = np.random.default_rng(0)
     mel = (rng.standard_normal((T, cfg.n_mels)) * 10 - 50).astype(np.float32)
     text = (0.1 * rng.standard_normal((T, cfg.text_dim))).astype(np.float32)
     phones = np.eye(cfg.n_phones, dtype=np.float32)[rng.integers(0, cfg.n_phones, T)]
-    pieces = inference.decoder_states(bundle, mel, text, 1, phones=phones)
+    pieces = inference.decoder_states(bundle, mel, text, 1, phones=phones, device=cpu)
     short = [(mel[:500], text[:500], 0, phones[:500])]
-    both = inference.batch_decoder_states(bundle, [*short, (mel, text, 1, phones)])
-    inference.LONG_FRAMES, limit = 10**9, inference.LONG_FRAMES
+    both = inference.batch_decoder_states(bundle, [*short, (mel, text, 1, phones)], device=cpu)
+    torch_states.LONG_FRAMES, limit = 10**9, torch_states.LONG_FRAMES
     try:
-        whole = inference.decoder_states(bundle, mel, text, 1, phones=phones)
-        alone = inference.decoder_states(bundle, *short[0][:3], phones=short[0][3])
+        whole = inference.decoder_states(bundle, mel, text, 1, phones=phones, device=cpu)
+        alone = inference.decoder_states(bundle, *short[0][:3], phones=short[0][3], device=cpu)
     finally:
-        inference.LONG_FRAMES = limit
+        torch_states.LONG_FRAMES = limit
     assert pieces.shape == (T, 2 * cfg.lstm_dim)
     assert float((pieces - whole).abs().max()) < 1e-5 < float(whole.abs().max())
     assert float((both[1] - whole).abs().max()) < 1e-5 and float((both[0] - alone).abs().max()) < 1e-5
+    in_numpy = inference.decoder_states(bundle, mel, text, 1, phones=phones)
+    assert isinstance(in_numpy, np.ndarray) and in_numpy.shape == (T, 2 * cfg.lstm_dim)
+    assert float(np.abs(in_numpy - whole.numpy()).max()) < 1e-5
 
 
 def test_mel_features_in_blocks_equal_one_stft():

@@ -339,7 +339,7 @@ def test_sigkill_of_the_batch_leaves_no_process_behind(tmp_path):
     speech = synthesize("We were amazed to find the old bakery still open.", sample_rate=16000).audio
     sf.write(tmp_path / "s.wav", speech, 16000)
     manifest = tmp_path / "lines.csv"
-    manifest.write_text("audio,output\n" + "".join(f"s.wav,{n}.usdc\n" for n in range(3000)))  # minutes of work
+    manifest.write_text("audio,output\n" + "".join(f"s.wav,{n}.usdc\n" for n in range(3000)))  # minutes
     proc = subprocess.Popen([sys.executable, "-m", "facegen", "batch", str(manifest), "-o",
                              str(tmp_path / "out"), "--jobs", "2", "-m", str(model), "--device", "cpu", "-q"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=REPO)
