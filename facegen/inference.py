@@ -64,7 +64,8 @@ def batch_decoder_states(bundle, clips: Sequence[tuple], *, device=None,
     if device is None or device == "cpu":
         from facegen.numpy_network import decoder_states as states_of
 
-        return [states_of(bundle.weights, cfg, mel, text, speaker, phones, fusion_frames)
+        weights = bundle.weights
+        return [states_of(weights, cfg, mel, text, speaker, phones, fusion_frames)
                 for mel, text, speaker, phones in clips]
     from facegen.torch_states import batch_states
 

@@ -18,6 +18,8 @@ import numpy as np
 
 from facegen.model_config import ModelConfig
 
+STEP_FRAMES = 1024  # frames whose LSTM input projections are made at once (1024 x 512 float32 = 2 MB)
+
 
 def _leaky(x: np.ndarray, slope: float) -> np.ndarray:
     return np.where(x > 0, x, x * np.float32(slope))
@@ -39,39 +41,37 @@ def _conv(w: dict[str, np.ndarray], name: str, x: np.ndarray, dilation: int) -> 
     return out
 
 
-def _lstm(inputs: list[np.ndarray], recurrent: list[np.ndarray]) -> list[np.ndarray]:
-    """Unidirectional LSTMs (torch's gate order i, f, g, o) run side by side, one step of each at a time:
-    `inputs[d]` [T, 4H] is direction d's input projection with both biases, already in the order it reads
-    its frames; `recurrent[d]` its weight_hh [4H, H]. Returns each one's hidden states [T, H], in that
-    order."""
-    D, (T, four_h) = len(inputs), inputs[0].shape
-    H = four_h // 4
-    x = np.stack(inputs, 0)  # [D, T, 4H]
-    w = np.stack([r.T for r in recurrent], 0)  # [D, H, 4H]
+def _lstm(w: dict[str, np.ndarray], x: np.ndarray, names: list[tuple[str, bool]]) -> np.ndarray:
+    """LSTMs over x [T, D] (torch's gate order i, f, g, o) run side by side, one step of each at a time:
+    `names` (weight name prefix such as "lstm." and suffix such as "l0_reverse", whether it reads the frames
+    from the end). Returns [T, len(names) * H], each one's hidden states in its columns, in frame order. The
+    input projections are made STEP_FRAMES frames at a time: nothing of the clip's length but x and the
+    output (a 2-hour clip's [T, 4H] projections would be 0.37 GB a direction)."""
+    D, T = len(names), len(x)
+    w_ih = [w[f"{prefix}weight_ih_{suffix}"].T for prefix, suffix, _ in names]
+    bias = [w[f"{prefix}bias_ih_{suffix}"] + w[f"{prefix}bias_hh_{suffix}"] for prefix, suffix, _ in names]
+    w_hh = np.stack([w[f"{prefix}weight_hh_{suffix}"].T for prefix, suffix, _ in names], 0)  # [D, H, 4H]
+    H = w_hh.shape[1]
     h = np.zeros((D, 1, H), np.float32)
     c = np.zeros((D, H), np.float32)
-    out = np.empty((D, T, H), np.float32)
-    for t in range(T):
-        z = x[:, t] + np.matmul(h, w)[:, 0]
-        s = 0.5 + 0.5 * np.tanh(0.5 * z)  # the sigmoid, without exp's overflow
-        c = s[:, H:2 * H] * c + s[:, :H] * np.tanh(z[:, 2 * H:3 * H])
-        out[:, t] = s[:, 3 * H:] * np.tanh(c)
-        h = out[:, t, None]
-    return list(out)
-
-
-def _projection(w: dict[str, np.ndarray], prefix: str, suffix: str, x: np.ndarray) -> np.ndarray:
-    return (x @ w[f"{prefix}weight_ih_{suffix}"].T + w[f"{prefix}bias_ih_{suffix}"]
-            + w[f"{prefix}bias_hh_{suffix}"]).astype(np.float32)
+    out = np.empty((T, D * H), np.float32)
+    rows = [np.arange(T - 1, -1, -1) if reverse else np.arange(T) for _, _, reverse in names]
+    for s in range(0, T, STEP_FRAMES):
+        steps = [row[s:s + STEP_FRAMES] for row in rows]
+        z_in = np.stack([x[r] @ wi + b for r, wi, b in zip(steps, w_ih, bias, strict=True)], 0)  # [D, n, 4H]
+        for t in range(len(steps[0])):
+            z = z_in[:, t] + np.matmul(h, w_hh)[:, 0]
+            g = 0.5 + 0.5 * np.tanh(0.5 * z)  # the sigmoid, without exp's overflow
+            c = g[:, H:2 * H] * c + g[:, :H] * np.tanh(z[:, 2 * H:3 * H])
+            h = (g[:, 3 * H:] * np.tanh(c))[:, None]
+            for d in range(D):
+                out[steps[d][t], d * H:(d + 1) * H] = h[d, 0]
+    return out
 
 
 def _bidirectional(w: dict[str, np.ndarray], layer: int, x: np.ndarray) -> np.ndarray:
     """Layer `layer` of the decoder BiLSTM over x [T, D]: [T, 2H] (forward states, then backward)."""
-    forward = _projection(w, "lstm.", f"l{layer}", x)
-    backward = _projection(w, "lstm.", f"l{layer}_reverse", x)[::-1]
-    fwd, bwd = _lstm([forward, backward],
-                     [w[f"lstm.weight_hh_l{layer}"], w[f"lstm.weight_hh_l{layer}_reverse"]])
-    return np.concatenate([fwd, bwd[::-1]], axis=1)
+    return _lstm(w, x, [("lstm.", f"l{layer}", False), ("lstm.", f"l{layer}_reverse", True)])
 
 
 def _audio(w: dict[str, np.ndarray], cfg: ModelConfig, mel: np.ndarray, speaker: np.ndarray,
@@ -91,7 +91,7 @@ def _audio(w: dict[str, np.ndarray], cfg: ModelConfig, mel: np.ndarray, speaker:
 def _text(w: dict[str, np.ndarray], cfg: ModelConfig, text: np.ndarray) -> np.ndarray:
     """The text encoder: text features [T, text_dim] → Hl [T, text_dim_out]."""
     h = _linear(w, "text.fc2", _leaky(_linear(w, "text.fc1", text), cfg.leaky_slope))
-    return _lstm([_projection(w, "text.lstm.", "l0", h)], [w["text.lstm.weight_hh_l0"]])[0]
+    return _lstm(w, h, [("text.lstm.", "l0", False)])
 
 
 def _fuse(cfg: ModelConfig, ha: np.ndarray | None, hl: np.ndarray | None, speaker: np.ndarray) -> np.ndarray:
