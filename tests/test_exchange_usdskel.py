@@ -359,3 +359,19 @@ def test_arkit_rig_blend_shapes(tmp_path, name):
     report = validate(out)
     assert report.ok and report.warnings == [], report.to_text()
     assert report.check("rig").detail.startswith("ARKit: 52 of 52 shapes (eyeBlinkLeft, ")
+
+
+def test_extents_equal_the_frames_min_and_max():
+    """frame_extents (blending on x, y, z planes) and point_extents (planes copied a block at a time) give
+    exactly each frame's min and max, for clips longer than a block."""
+    from facegen.exchange.usd_skel import frame_extents, point_extents
+
+    rng = np.random.default_rng(3)
+    template = rng.standard_normal((500, 3)).astype(np.float32)
+    offsets = rng.standard_normal((7, 500, 3)).astype(np.float32)
+    weights = rng.random((150, 7)).astype(np.float32)
+    frames = (weights @ offsets.reshape(7, -1)).reshape(150, 500, 3) + template
+    naive = np.stack([frames.min(1), frames.max(1)], axis=1)
+    assert np.array_equal(point_extents(frames), naive)
+    assert np.allclose(frame_extents(template, offsets, weights, block=64), naive, atol=1e-6, rtol=0)
+    assert frame_extents(template, offsets, weights).shape == (150, 2, 3)

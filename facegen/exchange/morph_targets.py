@@ -20,8 +20,6 @@ offset (`rest`, from the [0, 1] rescaling), a target named "rest" whose weight i
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from facegen.animation import Animation
@@ -65,19 +63,9 @@ def writer_basis(
 
 
 def _pca_basis(anim: Animation, morph_targets: int | str | None, tolerance: float) -> MorphBasis:
-    """pca.morph_basis with weights in [0, 1] and sparse targets; vertices that never move in `anim` get
-    exactly zero offsets in every target and in `rest` (PCA leaves float rounding there, and a fixed K has
-    no error budget to drop it), and the error is measured again then."""
-    basis = morph_basis(anim, morph_targets, tolerance, unit_weights=True, sparse=True)
-    moving = np.zeros(anim.num_vertices, bool)
-    template = np.asarray(anim.template, np.float32)
-    for _, block in anim.frame_blocks(256):  # in blocks: a [T, V, 3] boolean is large for long clips
-        moving |= np.any(block != template, axis=(0, 2))
-    if moving.all():
-        return basis
-    basis = replace(basis, targets=basis.targets * moving[None, :, None], rest=basis.rest * moving[:, None])
-    basis.max_error = max_vertex_error(anim, basis)
-    return basis
+    """pca.morph_basis with weights in [0, 1] and sparse targets (a vertex that never moves in `anim` has
+    exactly zero offsets in every target and in `rest`)."""
+    return morph_basis(anim, morph_targets, tolerance, unit_weights=True, sparse=True)
 
 
 def _arkit_basis(anim: Animation) -> MorphBasis:

@@ -67,14 +67,30 @@ def layer_info(basis: MorphBasis, count: int) -> dict:
 def frame_extents(template: np.ndarray, offsets: np.ndarray, weights: np.ndarray,
                   block: int = 64) -> np.ndarray:
     """[T, 2, 3] float32: the bounding box (min, max) of each blended frame template + weights[t] @
-    offsets."""
+    offsets. The blend runs on x, y, z planes ([K, 3, V]) so each minimum and maximum is over a contiguous
+    row (over [.., V, 3] numpy reduces the middle axis ~15x slower)."""
     template = np.asarray(template, np.float32)
-    flat = np.asarray(offsets, np.float32).reshape(len(offsets), -1)
+    offsets = np.asarray(offsets, np.float32)
+    planes = np.ascontiguousarray(offsets.transpose(0, 2, 1)).reshape(len(offsets), -1)
+    template_planes = np.ascontiguousarray(template.T)
     out = np.empty((len(weights), 2, 3), np.float32)
     for start in range(0, len(weights), block):
-        frames = (weights[start:start + block] @ flat).reshape(-1, *template.shape) + template
-        out[start:start + block, 0] = frames.min(1)
-        out[start:start + block, 1] = frames.max(1)
+        frames = (weights[start:start + block] @ planes).reshape(-1, *template_planes.shape)
+        frames += template_planes
+        out[start:start + block, 0] = frames.min(2)
+        out[start:start + block, 1] = frames.max(2)
+    return out
+
+
+def point_extents(frames: np.ndarray, block: int = 16) -> np.ndarray:
+    """[T, 2, 3]: the bounding box (min, max) of each of `frames` [T, V, 3], reduced over x, y, z planes
+    copied a block of frames at a time (see frame_extents)."""
+    frames = np.asarray(frames)
+    out = np.empty((len(frames), 2, 3), frames.dtype)
+    for start in range(0, len(frames), block):
+        planes = np.ascontiguousarray(frames[start:start + block].transpose(0, 2, 1))
+        out[start:start + block, 0] = planes.min(2)
+        out[start:start + block, 1] = planes.max(2)
     return out
 
 

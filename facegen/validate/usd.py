@@ -315,12 +315,12 @@ def _check_time_samples(report: Report, stage, mesh, times: list[float], what: s
             f"0..{count - 1}"
         )
     extent = mesh.GetExtentAttr()
-    if what != "points":  # blend shapes deform the rest pose: the extent must hold every blended frame
-        for t, frame in zip(times, frames, strict=False):
+    if what != "points" and len(frames):  # blend shapes deform the rest pose: the extent holds every frame
+        bounds = usd_skel.point_extents(frames).astype(np.float64)
+        for t, (low, high) in zip(times, bounds, strict=False):
             box = np.asarray(extent.Get(t) or [], dtype=np.float64)
-            points = np.asarray(frame, dtype=np.float64)
-            slack = 1e-6 * max(float(np.abs(points).max(initial=0.0)), 1.0)
-            if box.shape != (2, 3) or (points < box[0] - slack).any() or (points > box[1] + slack).any():
+            slack = 1e-6 * max(float(np.abs(low).max()), float(np.abs(high).max()), 1.0)
+            if box.shape != (2, 3) or (low < box[0] - slack).any() or (high > box[1] + slack).any():
                 problems.append(f"extent at time {t:g} does not bound the blended points")
                 break
     elif extent_problem is not None:
