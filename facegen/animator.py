@@ -81,6 +81,9 @@ class Clip(NetworkInput):
     strength: dict | None = None  # the network's motion scaled by region (facegen.strength), None: as it is
     strength_scales: np.ndarray | None = None  # [V], per vertex
     language: str = "en"  # of the transcript (facegen.languages)
+    phone_times: list | None = None  # the aligned phones, (CMU phone, start s, end s) (facegen.lip_seal)
+    lip_seal: bool = True  # shut the lips on p, b and m (facegen.lip_seal)
+    sealed: int = 0  # frames whose lips facegen.lip_seal shut, once run
 
 
 class Animator:
@@ -189,7 +192,7 @@ class Animator:
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
                 emotion: str | Emotion | None = None, head_motion: float = 1.0,
-                strength=None, language: str | None = None) -> Clip:
+                strength=None, language: str | None = None, lip_seal: bool = True) -> Clip:
         """Everything before the network (see `animate`): audio, word timings, text and audio features.
         `aligned`: the forced alignment of `text` done already (a batch's main process aligns waiting items).
         While an alignment started ahead still runs, the transcript's word vectors are computed (they need the
@@ -216,7 +219,7 @@ class Animator:
                                  on_mismatch=on_mismatch, language=language)
             clip.fps = check_fps(fps)
             clip.blink_rate, clip.seed, clip.emotion = blink_rate, seed, emotion
-            clip.head_motion, clip.strength = head_motion, strength
+            clip.head_motion, clip.strength, clip.lip_seal = head_motion, strength, bool(lip_seal)
             if strength is not None:  # a face without the regions it scales: refused before the network
                 from facegen.strength import region_scales
 
@@ -296,7 +299,8 @@ class Animator:
         reporter.progress(f"inference for {T} frames")
         return Clip(mel, text_feats, spk, timing.phones, audio_name=Path(audio).name, samples=samples,
                     sample_rate=sr, words=timing.words, word_timing=timing.source, mesh=mesh,
-                    match=timing.match, confidences=timing.confidences, language=language)
+                    match=timing.match, confidences=timing.confidences, language=language,
+                    phone_times=timing.phone_times)
 
     # ---------------------------------------------------------------------------------------- the network
 
@@ -400,6 +404,7 @@ class Animator:
                 "blinks": {"rate_per_minute": clip.blink_rate, "seed": clip.seed,
                            "times": [[b.start, b.duration] for b in clip.blinks or []]},
                 "saccades": [[s.start, s.duration, s.yaw, s.pitch] for s in clip.saccades or []],
+                "lip_seal": {"on": clip.lip_seal, "frames": clip.sealed},
                 **({"emotion": clip.emotion.as_dict()} if clip.emotion is not None else {}),
                 **({"emotion_spans": [{**e.as_dict(), "start": round(a, 4), "end": round(b, 4)}
                                       for e, a, b in clip.emotion_spans]} if clip.emotion_spans else {}),
@@ -418,7 +423,7 @@ class Animator:
                 meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
                 blink_rate: float = DEFAULT_RATE, seed: int = 0,
                 emotion: str | Emotion | None = None, head_motion: float = 1.0,
-                strength=None, language: str | None = None) -> Animation:
+                strength=None, language: str | None = None, lip_seal: bool = True) -> Animation:
         """Animate the face for one speech clip (see `facegen.animate`)."""
         PROFILE.mark("animate_start")
         check_fps(fps)
@@ -431,7 +436,8 @@ class Animator:
             clip = self.prepare(audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker,
                                 template=template, fps=fps, reporter=reporter, meanwhile=meanwhile,
                                 on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed, emotion=emotion,
-                                head_motion=head_motion, strength=strength, language=language)
+                                head_motion=head_motion, strength=strength, language=language,
+                                lip_seal=lip_seal)
         finally:
             self.close()
         with PROFILE.stage("inference"):
@@ -449,7 +455,7 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
             meanwhile: Callable[[], object] | None = None, on_mismatch: str = "error",
             blink_rate: float = DEFAULT_RATE, seed: int = 0,
             emotion: str | Emotion | None = None, head_motion: float = 1.0,
-            strength=None, language: str | None = None) -> Animation:
+            strength=None, language: str | None = None, lip_seal: bool = True) -> Animation:
     """Animate the face for one speech clip.
 
     Word timings come from `alignment` (a file), else from forced alignment of `text`, else from speech
@@ -477,11 +483,14 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
     (facegen.strength; 0-3, 1: as it is; the blinks, gaze, emotion and head keep their own controls).
     `language`: the transcript's, a code of `facegen languages` (default "en"): its words aligned with their
     pronunciation in that language (facegen.languages).
+    `lip_seal`: shut the lips on the aligned p, b and m where the network leaves a gap (facegen.lip_seal;
+    False: the network's lips as they are).
     """
     return Animator(bundle, text_model=text_model, device=device).animate(
         audio, text=text, alignment=alignment, no_text=no_text, speaker=speaker, template=template, fps=fps,
         stream=stream, reporter=reporter, meanwhile=meanwhile, on_mismatch=on_mismatch, blink_rate=blink_rate,
-        seed=seed, emotion=emotion, head_motion=head_motion, strength=strength, language=language)
+        seed=seed, emotion=emotion, head_motion=head_motion, strength=strength, language=language,
+        lip_seal=lip_seal)
 
 
 def forced_alignment_of(model: str | os.PathLike | None) -> str | None:

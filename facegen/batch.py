@@ -62,6 +62,7 @@ class Job:
     seed: int = 0  # of the random layers
     emotion: Emotion | None = None  # the row's 'emotion', else the run's (facegen.expression)
     head_motion: float = 1.0  # facegen.head
+    lip_seal: bool = True  # facegen.lip_seal
     strength: dict | None = None  # the row's 'strength', else the run's (facegen.strength)
     language: str | None = None  # the row's 'language', else the run's (facegen.languages)
     options: dict = field(default_factory=dict)  # write options, for each target whose format takes them
@@ -377,7 +378,7 @@ def _animate_timed(jobs: Iterable[Job], *, animator: Animator, batch_size: int, 
                                                on_mismatch=job.on_mismatch, blink_rate=job.blink_rate,
                                                seed=job.seed, emotion=job.emotion,
                                                head_motion=job.head_motion, strength=job.strength,
-                                               language=job.language)
+                                               language=job.language, lip_seal=job.lip_seal)
             except FacegenError as exc:
                 prepared[i] = exc
             except Exception as exc:  # noqa: BLE001 - one bad row never stops the others: it is that row's error

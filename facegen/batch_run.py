@@ -63,6 +63,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
                  default_ext: str = ".usdc", fps: float | None = None, usd_mode: str | None = None,
                  on_mismatch: str = "error", blink_rate: float = DEFAULT_RATE, seed: int = 0,
                  emotion: str | None = None, head_motion: float = 1.0, strength=None, language: str = "en",
+                 lip_seal: bool = True,
                  reporter: Reporter = NOTES, on_result: Callable[[JobResult], None] | None = None,
                  on_plan: Callable[[int, int], None] | None = None) -> BatchOutcome:
     """Animate every row of `manifest` into `out_dir` (see the module docstring).
@@ -74,7 +75,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
     "error" refuses a line whose transcript does not match its speech, "warn" writes it and flags it in
     the reports (each item's "match" holds its score either way: facegen.transcript_match); `blink_rate`
     and `seed`: every item's blinks (facegen.blinks); `emotion`: every item's (facegen.expression), where
-    its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head); `strength`:
+    its row has no 'emotion' of its own; `head_motion`: how much the heads move (facegen.head); `lip_seal`:
+    the lips shut on p, b and m (facegen.lip_seal); `strength`:
     every item's region scales (facegen.strength), where its row has no 'strength' of its own; `language`:
     every item's transcript language (facegen.languages), where its row has no 'language' of its own.
     `reporter`'s notes say, once per run and before any item runs, each control asked for that an output
@@ -121,7 +123,7 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         job.on_mismatch = on_mismatch
         job.blink_rate, job.seed = blink_rate, seed
         job.emotion = job.emotion if job.emotion is not None else emotion
-        job.head_motion = head_motion
+        job.head_motion, job.lip_seal = head_motion, bool(lip_seal)
         job.strength = job.strength if job.strength is not None else strength
         job.language = job.language or language
         job.options = {"mode": usd_mode} if usd_mode else {}
@@ -141,6 +143,8 @@ def run_manifest(manifest: str | os.PathLike, out_dir: str | os.PathLike, *, job
         options |= {"blinks": [blink_rate, seed]}
     if head_motion != 1.0:
         options |= {"head_motion": head_motion}
+    if not lip_seal:
+        options |= {"lip_seal": False}
     for line in dropped_controls(all_jobs, model_path):  # once per run, before any item runs
         reporter.note(line)
     state = RunState.load(out)

@@ -1,8 +1,8 @@
 """The layers over the network's frames of a clip: what the network cannot predict from the audio and the
-words — blinks timed by the speech (facegen.blinks), gaze (facegen.gaze: saccades, aversion; the eyeballs
-turned, the upper lids following; the parts' eyes too), the tongue (facegen.tongue), the clip's
-emotion (facegen.expression) and the head's motion
-(facegen.head, beside the frames: a transform). The times and settings go in the metadata (animator)."""
+words — the lips shut on p, b and m (facegen.lip_seal), blinks timed by the speech (facegen.blinks), gaze
+(facegen.gaze: saccades, aversion; the eyeballs turned, the upper lids following; the parts' eyes too), the
+tongue (facegen.tongue), the clip's emotion (facegen.expression) and the head's motion (facegen.head, beside
+the frames: a transform). The times and settings go in the metadata (animator)."""
 
 from __future__ import annotations
 
@@ -53,6 +53,14 @@ def add_layers(clip, stream, fps: float):
             offsets.append(mood)
     if curves:
         stream = stream.with_layers(np.stack(curves, 1), np.stack([o.reshape(-1) for o in offsets]))
+    if clip.lip_seal:  # after the layers above: the gap it shuts is the one they leave
+        from facegen.lip_seal import seal_curve
+
+        close = shapes.offset("mouthClose")
+        seal = seal_curve(stream, clip.mesh, clip.phone_times, fps, close)
+        if seal is not None:
+            stream = stream.with_layers(seal[:, None], close.reshape(1, -1))
+            clip.sealed = int(np.count_nonzero(seal))
     from facegen.face.parts import PartDrivers
     from facegen.tongue import tongue_curves
 

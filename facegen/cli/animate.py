@@ -63,6 +63,9 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--head-motion", type=FiniteRange(0, 3), default=1.0, show_default=True, metavar="AMOUNT",
               help="How much the head moves with the voice (nods, tilts, drift; written as a transform where "
                    "the format has one): 0 = still, 1 = as people do.")
+@click.option("--lip-seal/--no-lip-seal", default=True, show_default=True,
+              help="Shut the lips on p, b and m where the model leaves them apart (--no-lip-seal: the "
+                   "model's lips as they are).")
 @click.option("--emotion", metavar="LABEL[:INTENSITY]",
               help="An emotion over the whole clip, on top of what the words do: neutral, happy, sad, angry, "
                    "surprised, afraid or disgusted, intensity 0-1 (default 1), e.g. happy:0.6.")
@@ -79,7 +82,7 @@ from facegen.runtime import Reporter, say_stderr
 @click.option("--quiet", "-q", is_flag=True, help="No progress messages.")
 def animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
             usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, blink_rate, seed,
-            head_motion, emotion, language, strength, preview, device, quiet):
+            head_motion, lip_seal, emotion, language, strength, preview, device, quiet):
     """Animate the face for AUDIO and write OUTPUT."""
     from facegen.atomic import output_folders
 
@@ -88,12 +91,12 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
         _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
                  usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet,
                  blink_rate=blink_rate, seed=seed, emotion=emotion, head_motion=head_motion,
-                 strength=strength, language=language)
+                 strength=strength, language=language, lip_seal=lip_seal)
 
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
              usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
-             blink_rate, seed, emotion, head_motion, strength, language):
+             blink_rate, seed, emotion, head_motion, strength, language, lip_seal=True):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write
@@ -138,7 +141,7 @@ def _animate(audio, text, text_file, alignment, no_text, speaker, model, templat
                             template=template, fps=fps, stream=plan.streams, reporter=reporter,
                             meanwhile=plan.import_writer, on_mismatch=on_mismatch, blink_rate=blink_rate,
                             seed=seed, emotion=emotion, head_motion=head_motion, strength=strength,
-                            language=language)
+                            language=language, lip_seal=lip_seal)
     from facegen.word_timing import RECOGNISED
 
     if anim.metadata.get("word_timing") == RECOGNISED:  # what drives the face without a transcript: say it

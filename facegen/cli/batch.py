@@ -46,6 +46,8 @@ from facegen.cli.options import DEVICE, FiniteRange
               help="Seed of the random layers (blinks): a rerun gives the same files.")
 @click.option("--head-motion", type=FiniteRange(0, 3), default=1.0, show_default=True, metavar="AMOUNT",
               help="How much every line's head moves with its voice: 0 = still, 1 = as people do.")
+@click.option("--lip-seal/--no-lip-seal", default=True, show_default=True,
+              help="Shut the lips on p, b and m where the model leaves them apart.")
 @click.option("--emotion", metavar="LABEL[:INTENSITY]",
               help="An emotion over every line (neutral, happy, sad, angry, surprised, afraid, disgusted; "
                    "intensity 0-1); a manifest's 'emotion' column sets it per line.")
@@ -57,7 +59,7 @@ from facegen.cli.options import DEVICE, FiniteRange
                    "column sets it per line.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model, text_model, device,
-          batch_size, ext, usd_mode, fps, on_mismatch, blink_rate, seed, head_motion, emotion,
+          batch_size, ext, usd_mode, fps, on_mismatch, blink_rate, seed, head_motion, lip_seal, emotion,
           strength, language, quiet):
     """Animate many clips listed in MANIFEST (CSV, JSON or JSON lines: audio, text|text_file|alignment,
     speaker, output) into OUTPUT_DIR, each worker loading the model once; items unchanged since the last run
@@ -79,7 +81,7 @@ def batch(manifest, output_dir, jobs, formats, force, engine, ray_address, model
                                ray_address=ray_address, model=model, text_model=text_model, device=device,
                                batch_size=batch_size, default_ext=ext, fps=fps, usd_mode=usd_mode,
                                on_mismatch=on_mismatch, blink_rate=blink_rate, seed=seed,
-                               emotion=emotion, head_motion=head_motion, strength=strength,
+                               emotion=emotion, head_motion=head_motion, lip_seal=lip_seal, strength=strength,
                                language=language, reporter=reporter,
                                on_plan=planned,
                                on_result=lambda _r: bars and bars[0].update(1))
