@@ -146,10 +146,12 @@ class Animator:
 
     def word_alignment(self) -> str | None:
         """What the model needs from a transcript's forced alignment: "phones", "words" or None (see
-        `forced_alignment_of`); from the loaded bundle, else from the bundle file's header without torch."""
+        `bundle.forced_alignment_of`); from the loaded bundle, else from its file's header without torch."""
         if self._bundle is not None:
             cfg = self._bundle.config
             return "phones" if cfg.n_phones else "words" if cfg.uses_text else None
+        from facegen.bundle import forced_alignment_of
+
         return forced_alignment_of(self._model_path)
 
     # --------------------------------------------------------------------------------- alignment ahead
@@ -492,17 +494,3 @@ def animate(audio: str | os.PathLike, *, text: str | None = None, alignment: str
         seed=seed, emotion=emotion, head_motion=head_motion, strength=strength, language=language,
         lip_seal=lip_seal)
 
-
-def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
-    """What the model bundle at `model` (None: the built-in one) needs from a transcript's forced alignment:
-    "phones" (words and phones), "words", or None (an audio-only model, or a header that cannot be read:
-    load_bundle will say what is wrong). Read from the header only, without torch."""
-    from facegen.bundle import default_bundle_path, read_metadata
-    from facegen.model_config import ModelConfig
-
-    try:
-        config = ModelConfig.from_dict(read_metadata(model if model is not None else default_bundle_path())
-                                       ["model_config"])
-    except (FacegenError, KeyError, TypeError, ValueError):
-        return None
-    return "phones" if config.n_phones else "words" if config.uses_text else None

@@ -304,3 +304,17 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
 
 
 __all__ = ["Bundle", "default_bundle_path", "load_bundle", "read_metadata", "save_bundle"]
+
+
+def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
+    """What the model bundle at `model` (None: the built-in one) needs from a transcript's forced alignment:
+    "phones" (words and phones), "words", or None (an audio-only model, or a header that cannot be read:
+    load_bundle will say what is wrong). Read from the header only, without torch."""
+    from facegen.model_config import ModelConfig
+
+    try:
+        config = ModelConfig.from_dict(read_metadata(model if model is not None else default_bundle_path())
+                                       ["model_config"])
+    except (FacegenError, KeyError, TypeError, ValueError):
+        return None
+    return "phones" if config.n_phones else "words" if config.uses_text else None

@@ -172,7 +172,7 @@ def _alignable(queue: list[list[Job]], model: str | None) -> list[tuple[int, Job
     """(chunk index, job, whether the model needs its phones too) for the jobs this process can force-align,
     in queue order (taken from the end): those whose words come from forced alignment, when the model uses
     them."""
-    from facegen.animator import forced_alignment_of
+    from facegen.bundle import forced_alignment_of
     from facegen.word_timing import force_aligned
 
     needs = forced_alignment_of(model)

@@ -52,21 +52,23 @@ def seal_curve(stream, mesh, phone_times: Sequence | None, fps: float,
     FrameStream at `fps`, its layers included) at the frames of seal_frames; None when no frame needs it or
     the face lacks the lip regions."""
     from facegen.errors import FacegenError
-    from facegen.lipsync import FaceGeometry
+    from facegen.face.regions import RIG_REGIONS, mouth_middle
+    from facegen.face.rig import face_scale
 
     frames = seal_frames(phone_times, len(stream), fps)
-    if not len(frames):
+    if not len(frames) or any(r not in mesh.regions for r in RIG_REGIONS):
         return None
     try:
-        geo = FaceGeometry.of(mesh)
+        upper, lower = mouth_middle(mesh.regions)
     except FacegenError:
         return None
-    per_unit = float(np.mean(close[geo.upper, 1] - close[geo.lower, 1])) / geo.cm  # cm of gap, negative
+    _, cm = face_scale(np.asarray(mesh.vertices, np.float64), mesh.regions)  # mesh units per cm
+    per_unit = float(np.mean(close[upper, 1] - close[lower, 1])) / cm  # cm of gap, negative
     if not per_unit < 0:
         return None
-    points = stream.points(np.concatenate([geo.upper, geo.lower]))  # [T, 2n, 3], layers included
-    n = len(geo.upper)
-    gap = (points[frames, :n, 1] - points[frames, n:, 1]).mean(1) / geo.cm
+    points = stream.points(np.concatenate([upper, lower]))  # [T, 2n, 3], layers included
+    n = len(upper)
+    gap = (points[frames, :n, 1] - points[frames, n:, 1]).mean(1) / cm
     weights = np.zeros(len(stream), np.float32)
     weights[frames] = np.clip((gap - SEALED_CM) / -per_unit, 0.0, MAX_WEIGHT)
     return weights if weights.any() else None

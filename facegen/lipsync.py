@@ -20,7 +20,7 @@ import numpy as np
 
 from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
-from facegen.face.regions import LIPS, LIPSYNC_REGIONS, UPPER_FACE
+from facegen.face.regions import LIPS, LIPSYNC_REGIONS, UPPER_FACE, mouth_middle
 from facegen.phonetics import check_alphabet, is_silence, phone_visemes
 
 MAX_LAG = 3  # frames searched either way for the best-lag aperture correlation
@@ -66,16 +66,10 @@ class FaceGeometry:
             raise FacegenError(f"the mesh lacks the lip-sync regions {', '.join(missing)}: use the "
                                "procedural face (facegen.face.template.load_template) or a bundle made on it")
         reg = {k: np.asarray(mesh.regions[k], np.int64) for k in LIPSYNC_REGIONS}
-        mu, ml = reg["mouth_upper_margin"], reg["mouth_lower_margin"]
-        if len(mu) != len(ml) or len(mu) < 3:
-            raise FacegenError(f"the mouth margins must pair up (at least 3 each), got {len(mu)} upper and "
-                               f"{len(ml)} lower vertices")
+        upper, lower = mouth_middle(reg)
         t = np.asarray(mesh.vertices, np.float64)
         _, cm = face_scale(t, reg)
-        third = len(mu) // 3
-        middle = slice(third, len(mu) - third)
-        return cls(template=t, upper=mu[middle], lower=ml[middle], cm=cm,
-                   lips=reg[LIPS], upper_face=reg[UPPER_FACE])
+        return cls(template=t, upper=upper, lower=lower, cm=cm, lips=reg[LIPS], upper_face=reg[UPPER_FACE])
 
 
 def _frames(vertices: np.ndarray, geo: FaceGeometry, what: str) -> np.ndarray:

@@ -1,5 +1,5 @@
 """The network's configuration (model.py), without torch: a bundle's header is read with it before torch is
-imported (what a model needs from the words: pipeline.forced_alignment_of)."""
+imported (what a model needs from the words: bundle.forced_alignment_of)."""
 
 from __future__ import annotations
 

@@ -69,9 +69,11 @@ def test_intensity_zero_and_neutral_are_the_face_without_emotion(neutral, text):
     for emotion in ("happy:0", "neutral"):
         anim = facegen.animate(WAV, text=text, emotion=emotion)
         assert np.array_equal(anim.vertices, base.vertices), emotion
-    half = facegen.animate(WAV, text=text, emotion="happy:0.5").vertices - base.vertices
-    full = facegen.animate(WAV, text=text, emotion="happy").vertices - base.vertices
-    assert np.allclose(2 * half, full, atol=1e-5)  # linear in the intensity
+    # linear in the intensity (without the lip seal, whose weights answer the gap the emotion leaves)
+    plain = facegen.animate(WAV, text=text, lip_seal=False).vertices
+    half = facegen.animate(WAV, text=text, emotion="happy:0.5", lip_seal=False).vertices - plain
+    full = facegen.animate(WAV, text=text, emotion="happy", lip_seal=False).vertices - plain
+    assert np.allclose(2 * half, full, atol=1e-5)
 
 
 def test_cli_and_batch(tmp_path, text):

@@ -36,7 +36,7 @@ def both():
 
     animator = facegen.Animator()
     text = (EXAMPLE.with_suffix(".txt")).read_text()
-    kwargs = dict(text=text, blink_rate=0, head_motion=0)
+    kwargs = {"text": text, "blink_rate": 0, "head_motion": 0}
     return animator, animator.animate(EXAMPLE, **kwargs), animator.animate(EXAMPLE, lip_seal=False, **kwargs)
 
 
@@ -46,7 +46,8 @@ def test_the_aligned_bilabials_are_shut_and_nothing_else_moves(both):
     animator, sealed, raw = both
     mesh = animator.mesh()
     assert sealed.metadata["lip_seal"]["on"] and not raw.metadata["lip_seal"]["on"]
-    moved = np.flatnonzero(np.abs(np.asarray(sealed.vertices) - np.asarray(raw.vertices)).max(axis=(1, 2)) > 0)
+    change = np.abs(np.asarray(sealed.vertices) - np.asarray(raw.vertices)).max(axis=(1, 2))
+    moved = np.flatnonzero(change > 0)
     assert len(moved) == sealed.metadata["lip_seal"]["frames"] > 0
     gap_sealed, gap_raw = aperture(sealed.vertices, mesh), aperture(raw.vertices, mesh)
     # the frames it shut were open (the network left a gap there) and are closed to SEALED_CM now

@@ -9,6 +9,8 @@ named after its region.
 
 from __future__ import annotations
 
+import numpy as np
+
 LIPS = "lips"  # the lips and the skin just around them (LVE)
 UPPER_FACE = "upper_face"  # forehead, brows and lids: what the mouth must not move (FDD)
 
@@ -27,6 +29,21 @@ LIPSYNC_REGIONS = ("mouth_upper_margin", "mouth_lower_margin", "left_eyeball", "
 # every region of the procedural face (facegen.face.procedural)
 FACE_REGIONS = tuple(sorted({*RIG_REGIONS, "nose", LIPS, UPPER_FACE, "upper_lids", "lower_lids",
                              "mouth_cavity"}))
+
+
+def mouth_middle(regions: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(upper, lower) int64 vertex indices: the facing margin vertices of the middle third of the mouth (the
+    k-th upper faces the k-th lower), where lip aperture is measured (facegen.lipsync) and shut
+    (facegen.lip_seal)."""
+    from facegen.errors import FacegenError
+
+    mu = np.asarray(regions["mouth_upper_margin"], np.int64)
+    ml = np.asarray(regions["mouth_lower_margin"], np.int64)
+    if len(mu) != len(ml) or len(mu) < 3:
+        raise FacegenError(f"the mouth margins must pair up (at least 3 each), got {len(mu)} upper and "
+                           f"{len(ml)} lower vertices")
+    third = len(mu) // 3
+    return mu[third:len(mu) - third], ml[third:len(ml) - third]
 
 
 def region_name(stem: str) -> str:
