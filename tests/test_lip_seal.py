@@ -85,3 +85,24 @@ def test_cli_flag(both, tmp_path, flag):
     want, other = (raw, sealed) if flag == "--no-lip-seal" else (sealed, raw)
     assert np.allclose(frames, want.vertices, atol=1e-6)
     assert not np.allclose(frames, other.vertices, atol=1e-6)
+
+
+def test_batch_flag(both, tmp_path):
+    """`facegen batch --no-lip-seal` writes the network's lips; a rerun with the seal is not skipped as
+    unchanged (the option is in the items' content key) and writes the sealed frames."""
+    import csv
+    import subprocess
+    import sys
+
+    _, sealed, raw = both
+    manifest = tmp_path / "lines.csv"
+    with open(manifest, "w", newline="") as f:
+        csv.writer(f).writerows([["audio", "text", "output"],
+                                 [str(EXAMPLE), EXAMPLE.with_suffix(".txt").read_text(), "line.npy"]])
+    command = [sys.executable, "-m", "facegen", "batch", str(manifest), "-o", str(tmp_path / "out"), "-q",
+               "--jobs", "1", "--blink-rate", "0", "--head-motion", "0"]
+    for extra, want in ((["--no-lip-seal"], raw), ([], sealed)):
+        done = subprocess.run(command + extra, check=False, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        frames = np.load(tmp_path / "out" / "line.npy").reshape(len(want.vertices), -1, 3)
+        assert np.allclose(frames, want.vertices, atol=1e-6), extra
