@@ -303,9 +303,6 @@ def load_bundle(path: str | os.PathLike | None = None) -> Bundle:
     return bundle
 
 
-__all__ = ["Bundle", "default_bundle_path", "load_bundle", "read_metadata", "save_bundle"]
-
-
 def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
     """What the model bundle at `model` (None: the built-in one) needs from a transcript's forced alignment:
     "phones" (words and phones), "words", or None (an audio-only model, or a header that cannot be read:
@@ -318,3 +315,7 @@ def forced_alignment_of(model: str | os.PathLike | None) -> str | None:
     except (FacegenError, KeyError, TypeError, ValueError):
         return None
     return "phones" if config.n_phones else "words" if config.uses_text else None
+
+
+__all__ = ["Bundle", "default_bundle_path", "forced_alignment_of", "load_bundle", "read_metadata",
+           "save_bundle"]

@@ -50,13 +50,13 @@ def seal_curve(stream, mesh, phone_times: Sequence | None, fps: float,
                close: np.ndarray) -> np.ndarray | None:
     """[T] float32 weights of `close` ([V, 3], the mouthClose offsets) shutting the lips of `stream` (a
     FrameStream at `fps`, its layers included) at the frames of seal_frames; None when no frame needs it or
-    the face lacks the lip regions."""
+    the mouth's margins do not pair up. The mesh has ARKit's regions (facegen.layers asks for them first)."""
     from facegen.errors import FacegenError
-    from facegen.face.regions import RIG_REGIONS, mouth_middle
+    from facegen.face.regions import mouth_middle
     from facegen.face.rig import face_scale
 
     frames = seal_frames(phone_times, len(stream), fps)
-    if not len(frames) or any(r not in mesh.regions for r in RIG_REGIONS):
+    if not len(frames):
         return None
     try:
         upper, lower = mouth_middle(mesh.regions)

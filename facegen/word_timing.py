@@ -154,11 +154,11 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
     transcript; the words of an alignment file with its phones, or, where it has none, the phones aligned
     inside its word times (`alignment_phones`); or without a transcript (also with --no-text, which only drops
     the text features) the phone alignment of the recognised words."""
-    from facegen.phonetics import phone_frames, silence, to_cmu
+    from facegen.phonetics import silence
 
     if alignment is not None:
         words, phones, source = alignment_phones(samples, sr, alignment, reporter, language)
-        return Timing(words, source, phone_frames(phones, num_frames, fps), phone_times=to_cmu(phones))
+        return Timing(words, source, **_phones(phones, num_frames, fps))
     if text is not None and not no_text:
         _check_transcript(text)
         try:
@@ -170,7 +170,7 @@ def clip_words_and_phones(samples: np.ndarray, sr: int, num_frames: int, fps: fl
             timing = _heard_with_phones(samples, sr, num_frames, fps, no_text, reporter)
             timing.match = unaligned
             return timing
-        return Timing(words, FORCED, phone_frames(phones, num_frames, fps), match, phone_times=to_cmu(phones))
+        return Timing(words, FORCED, match=match, **_phones(phones, num_frames, fps))
     if language != "en":
         if not no_text:
             reporter.note(_NO_WORDS.format(language=language))
@@ -198,23 +198,30 @@ def _heard_with_phones(samples: np.ndarray, sr: int, num_frames: int, fps: float
                        reporter: Reporter) -> Timing:
     """Without a transcript: the recogniser's words, force-aligned again for their phones."""
     from facegen import align, recognition
-    from facegen.phonetics import phone_frames, silence, to_cmu
+    from facegen.phonetics import silence
 
     heard = recognition.hear(samples, sr)
-    times = None
     try:
         words, phones = ((heard.words, heard.phones) if heard.phones is not None  # long audio: heard with it
                          else align.align_phones(samples, sr, " ".join(w.text for w in heard.words)))
-        found, times = phone_frames(phones, num_frames, fps), to_cmu(phones)
+        found = _phones(phones, num_frames, fps)
     except FacegenError:
-        words, found = heard.words, silence(num_frames)
+        words, found = heard.words, {"phones": silence(num_frames)}
         reporter.note("no phones could be found in the audio without a transcript: the lips follow the audio "
                       "alone (give the transcript for better lip sync)")
     if not no_text:
         same = len(words) == len(heard.words)  # else a word the aligner split: the recogniser's times
-        return Timing(words if same else heard.words, RECOGNISED, found, confidences=heard.confidences,
-                      phone_times=times)
-    return Timing([], NONE, found, phone_times=times)
+        return Timing(words if same else heard.words, RECOGNISED, confidences=heard.confidences, **found)
+    return Timing([], NONE, **found)
+
+
+def _phones(phones, num_frames: int, fps: float) -> dict:
+    """Timing's `phones` (one-hot per frame, the network's phone stream) and `phone_times` (CMU phones with
+    their times) from aligned phones."""
+    from facegen.phonetics import phone_frames, to_cmu
+
+    times = to_cmu(phones)
+    return {"phones": phone_frames(times, num_frames, fps), "phone_times": times}
 
 
 def alignment_phones(samples: np.ndarray, sr: int, alignment: str | os.PathLike,

@@ -96,7 +96,7 @@ def animate(audio, text, text_file, alignment, no_text, speaker, model, template
 
 def _animate(audio, text, text_file, alignment, no_text, speaker, model, template, text_model, output,
              usd_mode, usd_clips, rig, morph_targets, tolerance, fps, on_mismatch, preview, device, quiet, *,
-             blink_rate, seed, emotion, head_motion, strength, language, lip_seal=True):
+             blink_rate, seed, emotion, head_motion, strength, language, lip_seal):
     from facegen.animator import Animator
     from facegen.atomic import Transaction
     from facegen.exchange.plan import plan_write

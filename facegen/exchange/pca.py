@@ -29,8 +29,9 @@ DEFAULT_TOLERANCE = 1e-3  # largest vertex error, as a fraction of the face's bo
 MAX_FRAME_TARGETS = 300  # `k="all"` (one target per frame) is refused for longer clips
 _OVERSAMPLE = 16  # extra random directions in the range finder beyond the targets kept
 _FIRST_RANK = 48  # range finder size tried first when K is chosen from the tolerance
-_SEARCH_FRAMES = (24, 96, 384)  # K is searched on this many evenly spaced frames (those under half the
-# clip's), coarse to fine, then confirmed on all
+# K is searched on this many evenly spaced frames (the counts under half the clip's), coarse to fine, then
+# confirmed on every frame
+_SEARCH_FRAMES = (24, 96, 384)
 _TILE = (64, 3 * 2048)  # rows x columns (x, y, z of 2048 vertices) per block when measuring errors
 SPARSE_SEARCH_SHARE = 0.9  # with sparse=True, K is chosen for this share of the tolerance
 
