@@ -45,7 +45,10 @@ PARAMS = {
     "carryover_s": (None, 0.015, 0.12),
     "pre_speech_jaw": (None, 0.0, 0.3),
     "close_ramp_s": (None, 0.01, 0.06),
+    "round_close": (None, 0.0, 0.9),  # rounded lips pursed (facegen.synth.curves.ROUND_CLOSE)
+    "w_close": (None, 0.0, 0.6),  # W's own lip_close (beside its rounding)
 }
+TABLE = {"w_close": ("W", "lip_close")}  # parameters that are entries of the VISEMES table
 OPEN_CM = 0.2  # real aperture above which a frame is open speech (as real_faces.py)
 
 
@@ -64,9 +67,11 @@ def apply(params: dict) -> dict:
     """Set the rig's parameters in facegen.synth.curves (a fit, not the shipped values); the old ones back."""
     from facegen.synth import curves
 
+    from facegen.face.rig import LOWER_CHANNELS
+
     old = {"VISEMES": dict(curves.VISEMES), "ANTICIPATION_S": curves.ANTICIPATION_S,
            "CARRYOVER_S": curves.CARRYOVER_S, "PRE_SPEECH_JAW": curves.PRE_SPEECH_JAW,
-           "CLOSE_RAMP_S": curves.CLOSE_RAMP_S}
+           "CLOSE_RAMP_S": curves.CLOSE_RAMP_S, "ROUND_CLOSE": curves.ROUND_CLOSE}
     visemes = dict(old["VISEMES"])
     for vis, (target, dom_jaw, dom_lips) in old["VISEMES"].items():
         target = target.copy()
@@ -75,13 +80,28 @@ def apply(params: dict) -> dict:
             target[0] = min(target[0] * params["jaw_gain"] * params[cls], 1.0)
         elif vis not in ("rest", "PBM"):
             dom_jaw = dom_jaw * params["consonant_jaw_dominance"]
+        for name, (entry, channel) in TABLE.items():
+            if vis == entry:
+                target[LOWER_CHANNELS.index(channel)] = params[name]
         visemes[vis] = (target, dom_jaw, dom_lips)
     curves.VISEMES = visemes
     curves.ANTICIPATION_S = params["anticipation_s"]
     curves.CARRYOVER_S = params["carryover_s"]
     curves.PRE_SPEECH_JAW = params["pre_speech_jaw"]
     curves.CLOSE_RAMP_S = params["close_ramp_s"]
+    curves.ROUND_CLOSE = params["round_close"]
     return old
+
+
+def shipped(name: str) -> float:
+    """The rig's value today of parameter `name` (a constant of facegen.synth.curves or a VISEMES entry)."""
+    from facegen.face.rig import LOWER_CHANNELS
+    from facegen.synth import curves
+
+    if name in TABLE:
+        entry, channel = TABLE[name]
+        return float(curves.VISEMES[entry][0][LOWER_CHANNELS.index(channel)])
+    return getattr(curves, name.upper())
 
 
 def restore(old: dict) -> None:
@@ -136,23 +156,26 @@ def loss(measured: dict) -> float:
     return (1.0 - measured["r"]) + 0.5 * abs(np.log(max(measured["ratio"], 1e-3)))
 
 
-def fit(scorer: Scorer, clips: list[dict], evals: int, start: dict) -> dict:
+def fit(scorer: Scorer, clips: list[dict], evals: int, start: dict, names: list[str] | None = None) -> dict:
+    """Nelder-Mead on the parameters `names` (default: all), the others held at `start`."""
     from scipy.optimize import minimize
 
-    names = list(PARAMS)
+    names = names or list(PARAMS)
     low = np.array([PARAMS[n][1] for n in names])
     high = np.array([PARAMS[n][2] for n in names])
 
     def unpack(x: np.ndarray) -> dict:
-        return dict(zip(names, np.clip(x, low, high), strict=True))
+        return {**start, **dict(zip(names, np.clip(x, low, high), strict=True))}
 
     def objective(x: np.ndarray) -> float:
         penalty = float(np.sum(np.maximum(low - x, 0) + np.maximum(x - high, 0))) * 10
         return loss(scorer.measure(clips, unpack(x))) + penalty
 
     x0 = np.array([start[n] for n in names])
+    # first steps of a tenth of each parameter's range (scipy's 5 % of the value never moves one that is 0)
+    simplex = np.vstack([x0, x0 + np.diag((high - low) / 10)])
     found = minimize(objective, x0, method="Nelder-Mead",
-                     options={"maxfev": evals, "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": None})
+                     options={"maxfev": evals, "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": simplex})
     return {k: round(float(v), 4) for k, v in unpack(found.x).items()}
 
 
@@ -162,16 +185,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evals", type=int, default=300)
     ap.add_argument("--json", type=Path, help="write the fitted parameters and the figures here")
     ap.add_argument("--start", type=Path, help="start from the parameters of an earlier fit (its --json)")
+    ap.add_argument("--fit", help="fit only these parameters (comma-separated names), the others as started")
     args = ap.parse_args(argv)
     clips = load(args.result)
     fit_on, held_out = clips[0::2], clips[1::2]
     scorer = Scorer()
     from facegen.synth import curves
 
-    start = {n: v[0] if v[0] is not None else getattr(curves, n.upper()) for n, v in PARAMS.items()}
+    start = {n: v[0] if v[0] is not None else shipped(n) for n, v in PARAMS.items()}
     begin = {**start, **(json.loads(args.start.read_text())["params"] if args.start else {})}
     t0 = time.perf_counter()
-    params = fit(scorer, fit_on, args.evals, begin)
+    names = args.fit.split(",") if args.fit else None
+    unknown = sorted(set(names or ()) - set(PARAMS))
+    if unknown:
+        ap.error(f"unknown parameter(s) {', '.join(unknown)}; choose from {', '.join(PARAMS)}")
+    params = fit(scorer, fit_on, args.evals, begin, names)
     rows = {}
     for label, p in (("today's rig", start), ("fitted", params)):
         rows[label] = {part: scorer.measure(group, p) for part, group in (("fit", fit_on),

@@ -15,7 +15,7 @@ import pytest
 
 from facegen.face.rig import CHANNELS, LOWER_CHANNELS
 from facegen.synth import curves
-from facegen.synth.curves import VISEMES, viseme_curves
+from facegen.synth.curves import held_target, viseme_curves
 
 # spread: /ɪ/'s 0.91 — GRID's /i/ (1.21 cm, letters read aloud: "e", "three") is held to be unusually wide
 REAL_CM = {"open": 1.27, "mid": 1.19, "spread": 0.91, "rounded": 0.49}
@@ -45,12 +45,28 @@ def _aperture(rig, lower: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("cls", list(CLASSES))
 def test_each_vowel_class_targets_at_least_the_real_opening_and_no_more_than_a_mouth_can(rig, cls):
     """A vowel's target is what it reaches when held: at least the real class's median (running speech falls
-    short of its targets) and under 2.3 cm; classes keep their real order (rounded the smallest)."""
-    held = _aperture(rig, np.stack([VISEMES[v][0] for v in CLASSES[cls]]))
-    assert REAL_CM[cls] <= np.median(held) <= 2.3, held
+    short of its targets) and under 2.3 cm; classes keep their real order (rounded the smallest). Rounded
+    vowels, pursed, may hold a little under it (0.8x): between open sounds the jaw parts them further (the
+    rig at the middle of GRID's UWs: 0.61 cm median, real 0.50)."""
+    held = _aperture(rig, np.stack([held_target(v) for v in CLASSES[cls]]))
+    assert REAL_CM[cls] * (0.8 if cls == "rounded" else 1.0) <= np.median(held) <= 2.3, held
     if cls != "rounded":
-        rounded = _aperture(rig, np.stack([VISEMES[v][0] for v in CLASSES["rounded"]]))
+        rounded = _aperture(rig, np.stack([held_target(v) for v in CLASSES["rounded"]]))
         assert np.median(rounded) < np.median(held)
+
+
+def test_rounded_lips_are_pursed_and_a_w_all_but_shut_between_vowels(rig):
+    """GRID's speakers at the middle of a W: 0.15 cm, of UW 0.50 cm, of open vowels 1.2-1.4 cm. The rig purses
+    rounded lips (ROUND_CLOSE, fitted: 0.2-0.8) and a W between two open vowels parts them under 0.7 cm while
+    the vowels stay over 1.1 cm; a held W parts them less than a held UW, and a held UW than an AA."""
+    assert 0.2 <= curves.ROUND_CLOSE <= 0.8
+    held = _aperture(rig, np.stack([held_target(v) for v in ("W", "UW", "AA")]))
+    assert held[0] < held[1] < held[2], held
+    fps = 100.0
+    phones = [("AY1", 0.5, 0.7), ("W", 0.7, 0.82), ("AA1", 0.82, 1.05)]
+    aperture = _aperture(rig, viseme_curves(phones, int(1.3 * fps), fps, alphabet="cmu"))
+    assert aperture[int(0.76 * fps)] < 0.7 and min(aperture[int(0.6 * fps)], aperture[int(0.95 * fps)]) > 1.1, (
+        aperture[[60, 76, 95]])
 
 
 def test_coarticulation_leads_and_closures_last_as_measured():

@@ -62,7 +62,7 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 0.73, 2.0),
     "KG": (_v(jaw_open=0.2), 0.58, 0.3),
     "H": (_v(jaw_open=0.25), 0.22, 0.2),
-    "W": (_v(jaw_open=0.05, lip_round=1.0), 0.88, 3.0),
+    "W": (_v(jaw_open=0.05, lip_close=0.47, lip_round=1.0), 0.88, 3.0),  # pursed shut: neighbours part them
     "Y": (_v(jaw_open=0.1, lip_wide=0.5), 0.73, 1.5),
     "AA": (_v(jaw_open=0.85, lip_wide=0.1), 2.5, 1.0),
     "AE": (_v(jaw_open=0.72, lip_wide=0.3), 2.5, 1.0),
@@ -76,6 +76,21 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "UH": (_v(jaw_open=0.26, lip_round=0.6), 2.0, 2.5),
     "UW": (_v(jaw_open=0.13, lip_round=1.0), 2.0, 3.5),
 }
+
+# Rounded lips are pursed: a viseme's lips part the less the more it rounds, whatever the jaw does (GRID's
+# speakers at the middle of a W: 0.15 cm, of UW: 0.50 cm, of open vowels 1.2-1.4 cm; docs/real_faces.md).
+# A viseme's lip_close target is its own plus ROUND_CLOSE x its lip_round.
+ROUND_CLOSE = 0.53
+
+
+def held_target(vis: str) -> np.ndarray:
+    """The pose [len(LOWER_CHANNELS)] viseme `vis` reaches when held: its VISEMES target, its lips pursed by
+    ROUND_CLOSE as much as it rounds."""
+    target = VISEMES[vis][0].copy()
+    close, round_ = LOWER_CHANNELS.index("lip_close"), LOWER_CHANNELS.index("lip_round")
+    target[close] = min(target[close] + ROUND_CLOSE * target[round_], 1.0)
+    return target
+
 
 VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
 ANTICIPATION_S = 0.117  # s, time constant of a segment's dominance before it (coarticulation ahead)
@@ -193,9 +208,8 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     den = np.full((n, C), 1e-9)
     ahead, behind = ANTICIPATION_S * style.coarticulation, CARRYOVER_S * style.coarticulation
     for start, end, vis, gain in segments:
-        target, dom_jaw, dom_lips = VISEMES[vis]
-        if vis == "inhale":
-            target = _v(jaw_open=PRE_SPEECH_JAW)
+        _, dom_jaw, dom_lips = VISEMES[vis]
+        target = _v(jaw_open=PRE_SPEECH_JAW) if vis == "inhale" else held_target(vis)
         if gain != 1.0:
             target = np.where(is_close, target, np.clip(target * gain, 0.0, 1.0))
         centre, half = (start + end) / 2, (end - start) / 2
