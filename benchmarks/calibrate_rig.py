@@ -146,6 +146,24 @@ class Scorer:
         return {"r": float(np.mean(rs)), "ratio": float(np.median(ratios)), "rs": rs}
 
 
+def per_phone(scorer: Scorer, clips: list[dict], params: dict) -> dict[str, tuple[int, float, float]]:
+    """{phone: (occurrences, real aperture, rig aperture)}: medians (cm) at the phones' middles over `clips`."""
+    old = apply(params)
+    try:
+        found: dict[str, list[tuple[float, float]]] = {}
+        for clip in clips:
+            ours, real = scorer.aperture(clip), clip["real"]
+            t = np.arange(len(real)) / 25.0
+            for phone, start, end in clip["phones"]:
+                middle = (start + end) / 2
+                found.setdefault(phone.rstrip("012"), []).append((np.interp(middle, t, real),
+                                                                  np.interp(middle, t, ours)))
+    finally:
+        restore(old)
+    return {p: (len(v), float(np.median([a for a, _ in v])), float(np.median([b for _, b in v])))
+            for p, v in sorted(found.items(), key=lambda kv: -len(kv[1]))}
+
+
 def _mesh():
     from facegen.face.template import load_template
 
@@ -185,6 +203,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evals", type=int, default=300)
     ap.add_argument("--json", type=Path, help="write the fitted parameters and the figures here")
     ap.add_argument("--start", type=Path, help="start from the parameters of an earlier fit (its --json)")
+    ap.add_argument("--phones", action="store_true",
+                    help="print the real and the rig's aperture per phone (the started parameters) and stop")
     ap.add_argument("--fit", help="fit only these parameters (comma-separated names), the others as started")
     args = ap.parse_args(argv)
     clips = load(args.result)
@@ -195,6 +215,11 @@ def main(argv: list[str] | None = None) -> int:
     start = {n: v[0] if v[0] is not None else shipped(n) for n, v in PARAMS.items()}
     begin = {**start, **(json.loads(args.start.read_text())["params"] if args.start else {})}
     t0 = time.perf_counter()
+    if args.phones:
+        print("| phone | n | real (cm) | rig (cm) |\n|---|---|---|---|")
+        for phone, (n, real, ours) in per_phone(scorer, clips, begin).items():
+            print(f"| {phone} | {n} | {real:.2f} | {ours:.2f} |")
+        return 0
     names = args.fit.split(",") if args.fit else None
     unknown = sorted(set(names or ()) - set(PARAMS))
     if unknown:
