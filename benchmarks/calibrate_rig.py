@@ -65,9 +65,8 @@ def load(path: Path) -> list[dict]:
 
 def apply(params: dict) -> dict:
     """Set the rig's parameters in facegen.synth.curves (a fit, not the shipped values); the old ones back."""
-    from facegen.synth import curves
-
     from facegen.face.rig import LOWER_CHANNELS
+    from facegen.synth import curves
 
     old = {"VISEMES": dict(curves.VISEMES), "ANTICIPATION_S": curves.ANTICIPATION_S,
            "CARRYOVER_S": curves.CARRYOVER_S, "PRE_SPEECH_JAW": curves.PRE_SPEECH_JAW,
@@ -147,7 +146,7 @@ class Scorer:
 
 
 def per_phone(scorer: Scorer, clips: list[dict], params: dict) -> dict[str, tuple[int, float, float]]:
-    """{phone: (occurrences, real aperture, rig aperture)}: medians (cm) at the phones' middles over `clips`."""
+    """{phone: (occurrences, real aperture, rig aperture)}: medians (cm) at the phones' middles in `clips`."""
     old = apply(params)
     try:
         found: dict[str, list[tuple[float, float]]] = {}
@@ -210,8 +209,6 @@ def main(argv: list[str] | None = None) -> int:
     clips = load(args.result)
     fit_on, held_out = clips[0::2], clips[1::2]
     scorer = Scorer()
-    from facegen.synth import curves
-
     start = {n: v[0] if v[0] is not None else shipped(n) for n, v in PARAMS.items()}
     begin = {**start, **(json.loads(args.start.read_text())["params"] if args.start else {})}
     t0 = time.perf_counter()

@@ -1,15 +1,16 @@
-"""A prompt library in another language said by MBROLA voices: speech from recorded diphones (real voices cut
-into sound pairs), nearer recorded speech than espeak-ng's formant synthesis, and not one of the recordings kept
-back for issue 25's independent check (Festival's non-English voices, Asterisk's prompts). It is what the
-foreign bound of the mismatch check (facegen.transcript_match.FOREIGN_WORD_GAP) is calibrated on.
+"""A prompt library in another language said by MBROLA voices: speech from recorded diphones (real voices
+cut into sound pairs), nearer recorded speech than espeak-ng's formant synthesis, and none of the recordings
+kept back for issue 25's independent check (Festival's non-English voices, Asterisk's prompts). It asks
+whether the foreign bound of the mismatch check (facegen.transcript_match.FOREIGN_WORD_GAP) could be chosen
+on speech like it (docs/results.md, "Every language": it could not).
 
 Writes, into OUT, NAME.wav for every line (16 kHz as MBROLA says it, or `--telephone`: 8 kHz, the band of a
 phone or IVR prompt library) and script.txt in Asterisk's script format (`name: text`), so that
 benchmarks/bench_mismatch.py reads it with `--sounds OUT --script OUT/script.txt`. The lines are the voices
 corpus's sentences of the language (facegen.synth.foreign_sentences: its common words, 5-11 a line), said in
 turn by the language's MBROLA voices through the espeak-ng program (Debian: `apt-get install espeak-ng mbrola
-mbrola-fr1 mbrola-fr4 mbrola-it3 mbrola-it4 mbrola-es1 mbrola-es2 mbrola-de2 mbrola-de6 mbrola-br1`, the voices
-from Debian's contrib and non-free components).
+mbrola-fr1 mbrola-fr4 mbrola-it3 mbrola-it4 mbrola-es1 mbrola-es2 mbrola-de2 mbrola-de6 mbrola-br1`, the
+voices from Debian's contrib and non-free components).
 
     python benchmarks/mbrola_library.py OUT --language fr [--lines 60] [--telephone]
 """

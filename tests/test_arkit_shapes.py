@@ -82,6 +82,24 @@ def test_jaw_open_drops_the_chin_and_parts_the_lips_leaving_the_brows(shapes, fa
     assert np.abs(jaw_open[r["brows"]]).max() < 1e-7 and np.abs(jaw_open[r["forehead"]]).max() < 1e-7
 
 
+def test_pucker_closes_the_lips_and_pushes_them_forward_funnel_parts_them(shapes, face):
+    """ARKit's mouthPucker is a kiss (closed lips contracted and pushed forward), mouthFunnel the lips forward
+    and apart: the centres of the lip margins stay within 1 mm of each other at pucker 1 (the rig's rounding
+    alone parts them ~4 mm), move forward at least 2 mm, and part by more than 3 mm at funnel 1."""
+    r, v, mm = face.regions, face.vertices, shapes.mm
+    mu, ml = r["mouth_upper_margin"], r["mouth_lower_margin"]
+    c_up, c_lo = mu[len(mu) // 2], ml[len(ml) // 2]
+
+    def gap(name: str) -> float:
+        moved = v + shapes.offset(name)
+        return float(moved[c_up, 1] - moved[c_lo, 1] - (v[c_up, 1] - v[c_lo, 1])) / mm
+
+    pucker = shapes.offset("mouthPucker")
+    assert abs(gap("mouthPucker")) < 1.0, gap("mouthPucker")
+    assert min(pucker[c_up, 2], pucker[c_lo, 2]) / mm > 2.0
+    assert gap("mouthFunnel") > 3.0
+
+
 def test_blink_left_closes_the_left_eye_only(shapes, face):
     r, v = face.regions, face.vertices
     blink = v + shapes.offset("eyeBlinkLeft")

@@ -62,11 +62,13 @@ def test_tongue_out_shows_for_th_only(spoken):
 
 def test_the_other_weights_are_the_fit_of_the_face(spoken):
     """Without the parts (main's fit: it never read the tongue) the 51 other weights are bit-identical; the
-    solver's own tongueOut (the lower lip a tongue pushes out) stays near 0."""
+    solver's own tongueOut (the lower lip a tongue pushes out) stays near 0: under 0.08 (0.05 at most seen
+    since mouthPucker closes the lips and the pursed rounding's forward lower lip is left to the fit), far
+    under the tongue's own."""
     anim, fit, _ = spoken
     before = fit_arkit(replace(anim, parts=None))
     assert np.array_equal(before.weights[:, OTHERS], fit.weights[:, OTHERS])
-    assert before.weights[:, TONGUE].max() < 0.05 < fit.weights[:, TONGUE].max()
+    assert before.weights[:, TONGUE].max() < 0.08 < 0.3 < fit.weights[:, TONGUE].max()
 
 
 def test_every_arkit_output_carries_it(spoken, tmp_path):

@@ -155,7 +155,9 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     sgn = np.where(upper, 1.0, -1.0)
     w_lo = f["w_lo"]
     out["mouthFunnel"] = d.delta(lip_funnel=1.0)
-    out["mouthPucker"] = d.delta(lip_round=1.0)
+    # ARKit's pucker is the closed lips contracted and pushed forward (a kiss): the rig's rounding alone parts
+    # them 4 mm, and a pursed W or /u/ (facegen.synth.curves.ROUND_CLOSE) would read as mouthClose
+    out["mouthPucker"] = d.delta(lip_round=1.0, lip_close=1.0)
     out["mouthRollLower"] = d.delta(lower_lip_tuck=1.0)
     # the upper lip's margin curls in over the teeth (down and back), the skin above it hardly moves
     out["mouthRollUpper"] = d.vec(dy=-0.25 * near * upper * lat - 0.05 * w_lo * lat,
