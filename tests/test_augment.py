@@ -161,26 +161,7 @@ def test_formant_shift_moves_the_envelope_not_the_pitch():
     assert centroid[1.1] / centroid[1.0] == pytest.approx(1.1, abs=0.06)
 
 
-@pytest.mark.parametrize("swing", [4.0, 12.0])
-def test_level_contour_swings_within_its_range_smoothly_and_keeps_the_timing(swing):
-    """A steady tone through the contour: its level per 10 ms moves within `swing` dB peak to peak (and over
-    half of it, so it does move), by under 1 dB per 10 ms (no steps), and the bursts stay where they were."""
-    tone = (0.1 * np.sin(2 * np.pi * 200 * np.arange(3 * SR) / SR)).astype(np.float32)  # 2 periods a frame
-    levels = []
-    for seed in range(5):
-        y = A.level_contour(tone, SR, swing, np.random.default_rng(seed))
-        frames = y[: len(y) // 160 * 160].reshape(-1, 160).astype(np.float64)
-        db = 10 * np.log10(np.mean(frames**2, 1)) - A.rms_dbfs(tone)
-        assert len(y) == len(tone) and y.dtype == np.float32
-        assert db.max() - db.min() <= swing + 0.05 and np.abs(np.diff(db)).max() < 1.0
-        levels.append(db.max() - db.min())
-    assert max(levels) > swing / 2
-    x = _bursts()
-    assert _onset(A.level_contour(x, SR, swing, np.random.default_rng(1))) == _onset(x)
-
-
-ALL = A.AugmentSpec(p_pitch=1, p_formant=1, p_tempo=1, p_contour=1, p_reverb=1, p_noise=1, p_band=1,
-                    p_codec=1, p_level=1)
+ALL = A.AugmentSpec(p_pitch=1, p_formant=1, p_tempo=1, p_reverb=1, p_noise=1, p_band=1, p_codec=1, p_level=1)
 
 
 def test_augment_is_deterministic_for_a_seed():
@@ -190,8 +171,8 @@ def test_augment_is_deterministic_for_a_seed():
     c, _, info_c = A.augment(x, SR, 8, ALL)
     assert np.array_equal(a, b) and scale_a == scale_b and info_a == info_b
     assert info_c != info_a and not np.array_equal(a[: len(c)], c[: len(a)])
-    assert set(info_a) == {"pitch_semitones", "formant_factor", "tempo_factor", "contour_db", "reverb",
-                           "noise", "band_hz", "codec", "level_dbfs"}
+    assert set(info_a) == {"pitch_semitones", "formant_factor", "tempo_factor", "reverb", "noise", "band_hz",
+                           "codec", "level_dbfs"}
     assert len(a) == round(len(x) * scale_a) and scale_a == pytest.approx(1 / info_a["tempo_factor"],
                                                                           rel=0.01)
     assert A.rms_dbfs(a) == pytest.approx(info_a["level_dbfs"], abs=0.5)
@@ -199,8 +180,8 @@ def test_augment_is_deterministic_for_a_seed():
 
 
 def test_augment_with_nothing_drawn_returns_the_clip():
-    none = A.AugmentSpec(p_pitch=0, p_formant=0, p_tempo=0, p_contour=0, p_reverb=0, p_noise=0, p_band=0,
-                         p_codec=0, p_level=0)
+    none = A.AugmentSpec(p_pitch=0, p_formant=0, p_tempo=0, p_reverb=0, p_noise=0, p_band=0, p_codec=0,
+                         p_level=0)
     x = _speechlike()
     y, scale, info = A.augment(x, SR, 0, none)
     assert np.array_equal(x, y) and scale == 1.0 and info == {}

@@ -1,7 +1,6 @@
 """Acoustic augmentation of mono float32 speech, so a model trained on synthetic voices hears what
-recordings sound like: pitch and formant (vocal-tract length) shifts, tempo, a level that rises and falls
-within the line, additive noise, room reverberation, band limits, lossy codec round trips and level. Each
-step is a function; `augment` draws a
+recordings sound like: pitch and formant (vocal-tract length) shifts, tempo, additive noise, room
+reverberation, band limits, lossy codec round trips and level. Each step is a function; `augment` draws a
 random chain of them from an `AugmentSpec` with a numpy Generator, deterministically for a given seed.
 
 Only `tempo` changes durations: it returns the factor by which phone and word times scale. Every other step
@@ -37,8 +36,6 @@ class AugmentSpec:
     formant_factor: tuple[float, float] = (0.9, 1.1)
     p_tempo: float = 0.5
     tempo_factor: tuple[float, float] = (0.9, 1.1)
-    p_contour: float = 0.5
-    contour_db: tuple[float, float] = (4.0, 12.0)  # the contour's swing, peak to peak
     p_reverb: float = 0.3
     rt60: tuple[float, float] = (0.2, 0.8)
     drr_db: tuple[float, float] = (0.0, 10.0)
@@ -101,34 +98,6 @@ def tempo(audio: np.ndarray, sr: int, factor: float) -> tuple[np.ndarray, float]
 
     out = _match_rms(librosa.effects.time_stretch(audio, rate=float(factor), n_fft=_n_fft(sr)), audio)
     return out, len(out) / len(audio)
-
-
-CONTOUR_KNOT_S = (0.25, 0.6)  # s between the level contour's random knots
-
-
-def level_contour(audio: np.ndarray, sr: int, swing_db: float, rng: np.random.Generator) -> np.ndarray:
-    """The speaker's level rising and falling within the line (a word said softer, a sentence trailing off,
-    the head turning from the microphone): a gain in dB that moves smoothly between random knots every
-    0.25-0.6 s, within `swing_db` peak to peak, half the time falling by the end as sentences do. The timing
-    is kept. Real speakers do not close their mouths when they speak softly: the rig's curves come from the
-    clean speech, so this teaches the model that the level alone does not shut the lips."""
-    n = len(audio)
-    if n == 0 or swing_db <= 0:
-        return np.asarray(audio, np.float32)
-    seconds = n / sr
-    knots = [0.0]
-    while knots[-1] < seconds:
-        knots.append(knots[-1] + float(rng.uniform(*CONTOUR_KNOT_S)))
-    db = rng.uniform(-swing_db / 2, swing_db / 2, len(knots))
-    if rng.random() < 0.5:  # declination: the line ends quieter than it began
-        db = db / 2 + np.linspace(swing_db / 4, -swing_db / 4, len(knots))
-    t = np.arange(n) / sr
-    # a smooth curve through the knots (cosine between them): no audible steps, no change of timing
-    k = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, len(knots) - 2)
-    left, right = np.asarray(knots)[k], np.asarray(knots)[k + 1]
-    w = (1 - np.cos(np.pi * np.clip((t - left) / (right - left), 0, 1))) / 2
-    gain_db = db[k] * (1 - w) + db[k + 1] * w
-    return (audio * 10.0 ** (gain_db / 20.0)).astype(np.float32)
 
 
 def _n_fft(sr: int) -> int:
@@ -283,9 +252,8 @@ def _soft_limit(x: np.ndarray, knee: float = 0.7, ceiling: float = 0.99) -> np.n
 
 def augment(audio: np.ndarray, sr: int, rng: np.random.Generator | int,
             spec: AugmentSpec | None = None) -> tuple[np.ndarray, float, dict]:
-    """A random chain over `audio`: pitch, formants, tempo, level contour (the speaker), reverb, noise (the
-    room), band limit, codec (the channel), level. Returns (audio, time_scale, what was applied with its
-    parameters)."""
+    """A random chain over `audio`: pitch, formants, tempo (the speaker), reverb, noise (the room), band
+    limit, codec (the channel), level. Returns (audio, time_scale, what was applied with its parameters)."""
     spec = spec or AugmentSpec()
     rng = np.random.default_rng(rng)
     out = np.asarray(audio, dtype=np.float32)
@@ -299,9 +267,6 @@ def augment(audio: np.ndarray, sr: int, rng: np.random.Generator | int,
     if rng.random() < spec.p_tempo:
         applied["tempo_factor"] = float(rng.uniform(*spec.tempo_factor))
         out, scale = tempo(out, sr, applied["tempo_factor"])
-    if rng.random() < spec.p_contour:
-        applied["contour_db"] = float(rng.uniform(*spec.contour_db))
-        out = level_contour(out, sr, applied["contour_db"], rng)
     if rng.random() < spec.p_reverb:
         rt60, drr = float(rng.uniform(*spec.rt60)), float(rng.uniform(*spec.drr_db))
         applied["reverb"] = {"rt60": rt60, "drr_db": drr}
