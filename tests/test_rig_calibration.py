@@ -102,3 +102,39 @@ def test_running_speech_opens_as_wide_as_real_speakers(rig):
     vowels = [int((a + b) / 2 * fps) for p, a, b in phones if p in ("IH", "UW", "AE", "EH", "AW")]
     assert 0.6 <= np.median(aperture[vowels]) <= 1.4, aperture[vowels]
     assert aperture[int(0.95 * fps)] < 0.05  # the first /b/ closes
+
+
+def test_calibrate_rig_recovers_a_known_rounding_and_reports_it_per_phone():
+    """benchmarks/calibrate_rig.py on 'real' tracks made by the rig itself with ROUND_CLOSE 0.25: `fit` of
+    round_close alone, started at the shipped value, finds 0.25 again, and `per_phone` shows the W's of the
+    clips more open in those tracks than in today's rig (less pursed)."""
+    import json
+    import sys
+    from pathlib import Path
+
+    bench = Path(__file__).resolve().parents[1] / "benchmarks"
+    sys.path.insert(0, str(bench))
+    try:
+        import calibrate_rig as cr
+    finally:
+        sys.path.remove(str(bench))
+    result = json.loads((bench / "results" / "real_faces_pursed.json").read_text())
+    names = ["lwbsza", "pwij3p", "swiz3n"]  # "white" in each: W, AY, T
+    clips = [{"name": n, "real": np.zeros(len(result["clips"][n]["tracks"]["real"]["aperture"])),
+              "phones": [tuple(p) for p in result["clips"][n]["phones"]], "words": []} for n in names]
+    scorer = cr.Scorer()
+    shipped = {n: v[0] if v[0] is not None else cr.shipped(n) for n, v in cr.PARAMS.items()}
+    truth = {**shipped, "round_close": 0.25}
+    old = cr.apply(truth)
+    try:
+        for clip in clips:
+            clip["real"] = scorer.aperture(clip)
+    finally:
+        cr.restore(old)
+    assert curves.ROUND_CLOSE == shipped["round_close"]  # restored
+    found = cr.fit(scorer, clips, 40, shipped, ["round_close"])
+    assert found["round_close"] == pytest.approx(0.25, abs=0.03)
+    assert {k: v for k, v in found.items() if k != "round_close"} == pytest.approx(
+        {k: v for k, v in shipped.items() if k != "round_close"})
+    n, real, rig = cr.per_phone(scorer, clips, shipped)["W"]
+    assert n == 3 and real > rig + 0.05, (real, rig)
