@@ -86,13 +86,13 @@ def test_pucker_closes_the_lips_and_pushes_them_forward_funnel_parts_them(shapes
     """ARKit's mouthPucker is a kiss (closed lips contracted and pushed forward), mouthFunnel the lips forward
     and apart: the centres of the lip margins stay within 1 mm of each other at pucker 1 (the rig's rounding
     alone parts them ~4 mm), move forward at least 2 mm, and part by more than 3 mm at funnel 1."""
-    r, v, mm = face.regions, face.vertices, shapes.mm
+    r, mm = face.regions, shapes.mm
     mu, ml = r["mouth_upper_margin"], r["mouth_lower_margin"]
     c_up, c_lo = mu[len(mu) // 2], ml[len(ml) // 2]
 
-    def gap(name: str) -> float:
-        moved = v + shapes.offset(name)
-        return float(moved[c_up, 1] - moved[c_lo, 1] - (v[c_up, 1] - v[c_lo, 1])) / mm
+    def gap(name: str) -> float:  # how far the shape parts the lip centres (mm)
+        offset = shapes.offset(name)
+        return float(offset[c_up, 1] - offset[c_lo, 1]) / mm
 
     pucker = shapes.offset("mouthPucker")
     assert abs(gap("mouthPucker")) < 1.0, gap("mouthPucker")

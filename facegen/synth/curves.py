@@ -81,14 +81,14 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
 # speakers at the middle of a W: 0.15 cm, of UW: 0.50 cm, of open vowels 1.2-1.4 cm; docs/real_faces.md).
 # A viseme's lip_close target is its own plus ROUND_CLOSE x its lip_round.
 ROUND_CLOSE = 0.53
+_CLOSE, _ROUND = LOWER_CHANNELS.index("lip_close"), LOWER_CHANNELS.index("lip_round")
 
 
 def held_target(vis: str) -> np.ndarray:
     """The pose [len(LOWER_CHANNELS)] viseme `vis` reaches when held: its VISEMES target, its lips pursed by
     ROUND_CLOSE as much as it rounds."""
     target = VISEMES[vis][0].copy()
-    close, round_ = LOWER_CHANNELS.index("lip_close"), LOWER_CHANNELS.index("lip_round")
-    target[close] = min(target[close] + ROUND_CLOSE * target[round_], 1.0)
+    target[_CLOSE] = min(target[_CLOSE] + ROUND_CLOSE * target[_ROUND], 1.0)
     return target
 
 
