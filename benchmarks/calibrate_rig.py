@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-CLASSES = {"open": ("AA", "AE", "AO"), "mid": ("AH", "EH", "ER", "OW"), "spread": ("IY", "IH"),
-           "rounded": ("UW", "UH")}
+CLASSES = {"open": ("AA", "AE", "AO"), "mid": ("EH", "ER", "OW"), "schwa": ("AH",), "spread": ("IY", "IH"),
+           "rounded": ("UW", "UH")}  # schwa apart: reduced in running speech (function words), full in GRID
 # name: (start, low, high); gains multiply the shipped rig's values (1: as shipped), the rest replace them.
 # The shipped rig is the result of `--start` from an earlier fit on the rig before calibration (fit r 0.43 ->
 # 0.58, held out 0.62 -> 0.70; docs/real_faces.md).
@@ -38,6 +38,7 @@ PARAMS = {
     "jaw_gain": (1.0, 0.6, 2.5),
     "open": (1.0, 0.6, 1.6),
     "mid": (1.0, 0.6, 1.6),
+    "schwa": (1.0, 0.3, 1.6),
     "spread": (1.0, 0.6, 2.0),  # GRID's /i/ (letters read aloud: "e", "three") opens unusually wide
     "rounded": (1.0, 0.6, 2.0),
     "consonant_jaw_dominance": (1.0, 0.2, 1.5),
@@ -47,8 +48,10 @@ PARAMS = {
     "close_ramp_s": (None, 0.01, 0.06),
     "round_close": (None, 0.0, 0.9),  # rounded lips pursed (facegen.synth.curves.ROUND_CLOSE)
     "w_close": (None, 0.0, 0.6),  # W's own lip_close (beside its rounding)
+    "fv_close": (None, 0.0, 1.0),  # f/v's lip_close: the lower lip up against the upper teeth
 }
-TABLE = {"w_close": ("W", "lip_close")}  # parameters that are entries of the VISEMES table
+# parameters that are entries of the VISEMES table
+TABLE = {"w_close": ("W", "lip_close"), "fv_close": ("FV", "lip_close")}
 OPEN_CM = 0.2  # real aperture above which a frame is open speech (as real_faces.py)
 
 
@@ -173,8 +176,10 @@ def loss(measured: dict) -> float:
     return (1.0 - measured["r"]) + 0.5 * abs(np.log(max(measured["ratio"], 1e-3)))
 
 
-def fit(scorer: Scorer, clips: list[dict], evals: int, start: dict, names: list[str] | None = None) -> dict:
-    """Nelder-Mead on the parameters `names` (default: all), the others held at `start`."""
+def fit(scorer: Scorer, clips: list[dict], evals: int, start: dict, names: list[str] | None = None,
+        capture: Capture | None = None, weight: float = 1.0) -> dict:
+    """Nelder-Mead on the parameters `names` (default: all), the others held at `start`; with a `capture`,
+    `weight` x (1 - the rig's jaw r on its first half) is added to the loss."""
     from scipy.optimize import minimize
 
     names = names or list(PARAMS)
@@ -186,7 +191,8 @@ def fit(scorer: Scorer, clips: list[dict], evals: int, start: dict, names: list[
 
     def objective(x: np.ndarray) -> float:
         penalty = float(np.sum(np.maximum(low - x, 0) + np.maximum(x - high, 0))) * 10
-        return loss(scorer.measure(clips, unpack(x))) + penalty
+        extra = weight * (1.0 - capture.r(unpack(x), 0)) if capture is not None else 0.0
+        return loss(scorer.measure(clips, unpack(x))) + extra + penalty
 
     x0 = np.array([start[n] for n in names])
     # first steps of a tenth of each parameter's range (scipy's 5 % of the value never moves one that is 0)
@@ -194,6 +200,54 @@ def fit(scorer: Scorer, clips: list[dict], evals: int, start: dict, names: list[
     found = minimize(objective, x0, method="Nelder-Mead",
                      options={"maxfev": evals, "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": simplex})
     return {k: round(float(v), 4) for k, v in unpack(found.x).items()}
+
+
+class Capture:
+    """A real ARKit take with its audio (a Live Link Face CSV and WAV, as benchmarks/arkit_capture.py reads
+    them): the capture's jawOpen on 25 fps frames, and the phones facegen aligns to the words it recognises in
+    the audio (natural speech has no transcript). The rig's jaw_open from those phones is held against the
+    capture's jawOpen: Pearson r at the best lag within MAX_LAG frames (the capture may trail its audio by a
+    tracking latency, docs/arkit_capture.md), on the take's first half (fitted) or its second (held out)."""
+
+    MAX_LAG = 3  # frames (120 ms)
+
+    def __init__(self, csv_path: Path, wav_path: Path) -> None:
+        import arkit_capture
+
+        from facegen.audio import load_audio
+        from facegen.runtime import SILENT
+        from facegen.synth.curves import loudness_envelope
+        from facegen.word_timing import clip_words_and_phones
+
+        take = arkit_capture.read_capture(csv_path)
+        audio, sr = load_audio(wav_path)
+        self.n = int(min(take.times[-1], len(audio) / sr) * 25.0)
+        self.jaw = arkit_capture.on_frames(take, 25.0, self.n)[:, take.names.index("jawOpen")]
+        timing = clip_words_and_phones(audio, sr, self.n, 25.0, text=None, alignment=None, no_text=True,
+                                       reporter=SILENT)
+        self.phones = timing.phone_times or []
+        self.loudness = loudness_envelope(audio, sr)
+
+    def rig_jaw(self, params: dict) -> np.ndarray:
+        from facegen.synth.curves import viseme_curves
+
+        old = apply(params)
+        try:
+            return viseme_curves(self.phones, self.n, 25.0, alphabet="cmu", loudness=self.loudness)[:, 0]
+        finally:
+            restore(old)
+
+    def r(self, params: dict, half: int) -> float:
+        """The best-lag r of the rig's jaw_open with the capture's jawOpen over `half` (0: first half)."""
+        ours = self.rig_jaw(params)
+        cut = self.n // 2
+        part = slice(0, cut) if half == 0 else slice(cut, self.n)
+        a, b = ours[part], self.jaw[part]
+        best = -1.0
+        for lag in range(-self.MAX_LAG, self.MAX_LAG + 1):  # + : the rig late
+            x, y = (a[lag:], b[:len(b) - lag]) if lag >= 0 else (a[:lag], b[-lag:])
+            best = max(best, float(np.corrcoef(x, y)[0, 1]))
+        return best
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -205,6 +259,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--phones", action="store_true",
                     help="print the real and the rig's aperture per phone (the started parameters) and stop")
     ap.add_argument("--fit", help="fit only these parameters (comma-separated names), the others as started")
+    ap.add_argument("--capture", nargs=2, type=Path, metavar=("CSV", "WAV"),
+                    help="also follow the jaw of a real ARKit take with its audio (Live Link Face CSV "
+                    "and WAV): the rig's jaw_open against its jawOpen, first half fitted, second held out")
+    ap.add_argument("--capture-weight", type=float, default=1.0,
+                    help="weight of the take's (1 - r) in the loss beside the GRID clips' (default 1)")
     args = ap.parse_args(argv)
     clips = load(args.result)
     fit_on, held_out = clips[0::2], clips[1::2]
@@ -221,17 +280,23 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(names or ()) - set(PARAMS))
     if unknown:
         ap.error(f"unknown parameter(s) {', '.join(unknown)}; choose from {', '.join(PARAMS)}")
-    params = fit(scorer, fit_on, args.evals, begin, names)
+    capture = Capture(*args.capture) if args.capture else None
+    params = fit(scorer, fit_on, args.evals, begin, names, capture, args.capture_weight)
     rows = {}
     for label, p in (("today's rig", start), ("fitted", params)):
         rows[label] = {part: scorer.measure(group, p) for part, group in (("fit", fit_on),
                                                                            ("held out", held_out))}
+        if capture is not None:
+            rows[label]["capture"] = {"fit": capture.r(p, 0), "held out": capture.r(p, 1)}
     print(f"{len(clips)} clips ({len(fit_on)} fit, {len(held_out)} held out), "
           f"{time.perf_counter() - t0:.0f} s")
-    print("| rig | fit: r | fit: ratio | held out: r | held out: ratio |\n|---|---|---|---|---|")
+    head = "| rig | fit: r | fit: ratio | held out: r | held out: ratio |"
+    print(head + (" take's jaw r: fit half | held-out half |" if capture else "")
+          + "\n|---|---|---|---|---|" + ("---|---|" if capture else ""))
     for label, m in rows.items():
+        take = f" {m['capture']['fit']:.2f} | {m['capture']['held out']:.2f} |" if capture else ""
         print(f"| {label} | {m['fit']['r']:.2f} | {m['fit']['ratio']:.2f} | {m['held out']['r']:.2f} | "
-              f"{m['held out']['ratio']:.2f} |")
+              f"{m['held out']['ratio']:.2f} |" + take)
     print("fitted:", json.dumps(params))
     if args.json:
         args.json.write_text(json.dumps({"params": params, "rows": rows}, indent=1))

@@ -48,33 +48,37 @@ def _v(**kw: float) -> np.ndarray:
     return np.array([kw.get(c, 0.0) for c in LOWER_CHANNELS])
 
 
-# targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme (a phone's visemes: facegen.phonetics)
+# targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme (a phone's visemes: facegen.phonetics). The
+# vowels' jaw openings, the consonants' jaw dominances and the coarticulation times are fitted on real faces
+# (benchmarks/calibrate_rig.py: the lip aperture of 11 GRID clips and the jaw of a real iPhone take of running
+# speech; docs/real_faces.md): open vowels open widest, schwa least (reduced in running speech); f/v's
+# lip_close (0.9) brings the lower lip to the upper teeth (GRID's speakers at an f: 0.14 cm, a v: 0.22).
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
-    "inhale": (_v(), 1.0, 1.0),  # the lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
+    "inhale": (_v(), 0.81, 1.0),  # lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
     "PBM": (_v(jaw_open=0.04, lip_close=1.0), 1.5, 2.5),
-    "FV": (_v(jaw_open=0.08, lower_lip_tuck=1.0, upper_lip_raise=0.25), 1.1, 3.0),
-    "TH": (_v(jaw_open=0.15, lip_wide=0.15), 1.1, 0.8),
-    "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 1.46, 1.2),
-    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 0.88, 2.5),
-    "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 0.73, 0.3),
-    "L": (_v(jaw_open=0.2), 0.73, 0.3),
-    "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 0.73, 2.0),
-    "KG": (_v(jaw_open=0.2), 0.58, 0.3),
-    "H": (_v(jaw_open=0.25), 0.22, 0.2),
-    "W": (_v(jaw_open=0.05, lip_close=0.47, lip_round=1.0), 0.88, 3.0),  # pursed shut: neighbours part them
-    "Y": (_v(jaw_open=0.1, lip_wide=0.5), 0.73, 1.5),
-    "AA": (_v(jaw_open=0.85, lip_wide=0.1), 2.5, 1.0),
-    "AE": (_v(jaw_open=0.72, lip_wide=0.3), 2.5, 1.0),
-    "AH": (_v(jaw_open=0.77), 2.0, 0.8),
-    "ER": (_v(jaw_open=0.66, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
-    "EH": (_v(jaw_open=0.99, lip_wide=0.35), 2.0, 1.2),
-    "IY": (_v(jaw_open=0.35, lip_wide=0.85), 2.0, 2.0),
-    "IH": (_v(jaw_open=0.58, lip_wide=0.55), 2.0, 1.5),
-    "AO": (_v(jaw_open=0.72, lip_round=0.55), 2.0, 2.0),
-    "OW": (_v(jaw_open=0.88, lip_round=0.7), 2.0, 2.5),
-    "UH": (_v(jaw_open=0.26, lip_round=0.6), 2.0, 2.5),
-    "UW": (_v(jaw_open=0.13, lip_round=1.0), 2.0, 3.5),
+    "FV": (_v(jaw_open=0.08, lip_close=0.9, lower_lip_tuck=1.0, upper_lip_raise=0.25), 0.89, 3.0),
+    "TH": (_v(jaw_open=0.15, lip_wide=0.15), 0.89, 0.8),
+    "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 1.19, 1.2),
+    "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 0.72, 2.5),
+    "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 0.59, 0.3),
+    "L": (_v(jaw_open=0.2), 0.59, 0.3),
+    "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 0.59, 2.0),
+    "KG": (_v(jaw_open=0.2), 0.47, 0.3),
+    "H": (_v(jaw_open=0.25), 0.18, 0.2),
+    "W": (_v(jaw_open=0.05, lip_close=0.47, lip_round=1.0), 0.72, 3.0),  # pursed shut: neighbours part them
+    "Y": (_v(jaw_open=0.1, lip_wide=0.5), 0.59, 1.5),
+    "AA": (_v(jaw_open=1.0, lip_wide=0.1), 2.5, 1.0),
+    "AE": (_v(jaw_open=1.0, lip_wide=0.3), 2.5, 1.0),
+    "AH": (_v(jaw_open=0.25), 2.0, 0.8),  # schwa: reduced in running speech
+    "ER": (_v(jaw_open=0.51, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
+    "EH": (_v(jaw_open=0.77, lip_wide=0.35), 2.0, 1.2),
+    "IY": (_v(jaw_open=0.32, lip_wide=0.85), 2.0, 2.0),
+    "IH": (_v(jaw_open=0.53, lip_wide=0.55), 2.0, 1.5),
+    "AO": (_v(jaw_open=1.0, lip_round=0.55), 2.0, 2.0),
+    "OW": (_v(jaw_open=0.69, lip_round=0.7), 2.0, 2.5),
+    "UH": (_v(jaw_open=0.27, lip_round=0.6), 2.0, 2.5),
+    "UW": (_v(jaw_open=0.135, lip_round=1.0), 2.0, 3.5),
 }
 
 # Rounded lips are pursed: a viseme's lips part the less the more it rounds, whatever the jaw does (GRID's
@@ -93,13 +97,13 @@ def held_target(vis: str) -> np.ndarray:
 
 
 VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
-ANTICIPATION_S = 0.117  # s, time constant of a segment's dominance before it (coarticulation ahead)
-CARRYOVER_S = 0.03  # s, after it
+ANTICIPATION_S = 0.1  # s, time constant of a segment's dominance before it (coarticulation ahead)
+CARRYOVER_S = 0.019  # s, after it
 CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.034, 0.06  # s, the lips' and the jaw's ramps into and out of a p/b/m
 # People part their lips before they speak after a pause (an in-breath: real speakers 0.02-0.43 s before the
 # first sound, median 0.36 s, docs/real_faces.md): the last PRE_SPEECH_S of a pause of PAUSE_S or more opens
 # the jaw to PRE_SPEECH_JAW.
-PRE_SPEECH_S, PAUSE_S, PRE_SPEECH_JAW = 0.3, 0.3, 0.2
+PRE_SPEECH_S, PAUSE_S, PRE_SPEECH_JAW = 0.3, 0.3, 0.3
 
 PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
 PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range

@@ -40,8 +40,9 @@ from facegen.processes import process_pool
 from facegen.runtime import SILENT, Reporter, set_threads
 from facegen.synth.voices import CORPUS_LANGUAGES, FOREIGN_VARIANTS
 
-VERSION = 5  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
-# 5: rounded lips pursed (facegen.synth.curves.ROUND_CLOSE)
+VERSION = 7  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
+# 5: rounded lips pursed (facegen.synth.curves.ROUND_CLOSE); (6: a level contour, reverted); 7: the jaw
+# calibrated on running speech too (a real ARKit take: schwa reduced, open vowels wider, f/v lips to teeth)
 MANIFEST = "voices.json"
 RATE = 16000  # Hz of the stored audio (the model's)
 FPS = 25.0
