@@ -51,8 +51,10 @@ def _v(**kw: float) -> np.ndarray:
 # targets over LOWER_CHANNELS and dominance (jaw, lips) per viseme (a phone's visemes: facegen.phonetics). The
 # vowels' jaw openings, the consonants' jaw dominances and the coarticulation times are fitted on real faces
 # (benchmarks/calibrate_rig.py: the lip aperture of 11 GRID clips and the jaw of a real iPhone take of running
-# speech; docs/real_faces.md): open vowels open widest, schwa least (reduced in running speech); f/v's
-# lip_close (0.9) brings the lower lip to the upper teeth (GRID's speakers at an f: 0.14 cm, a v: 0.22).
+# speech; docs/real_faces.md): open vowels open widest (0.87 at a clip's median loudness: louder ones and
+# wide-jawed speakers open up to 1, PROSODY_GAIN and the style's jaw_gain), schwa least (reduced in running
+# speech); f/v's lip_close (0.9) brings the lower lip to the upper teeth (GRID's speakers at an f: 0.14 cm,
+# a v: 0.22).
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
     "inhale": (_v(), 0.81, 1.0),  # lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
@@ -68,17 +70,17 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "H": (_v(jaw_open=0.25), 0.18, 0.2),
     "W": (_v(jaw_open=0.05, lip_close=0.47, lip_round=1.0), 0.72, 3.0),  # pursed shut: neighbours part them
     "Y": (_v(jaw_open=0.1, lip_wide=0.5), 0.59, 1.5),
-    "AA": (_v(jaw_open=1.0, lip_wide=0.1), 2.5, 1.0),
-    "AE": (_v(jaw_open=1.0, lip_wide=0.3), 2.5, 1.0),
-    "AH": (_v(jaw_open=0.25), 2.0, 0.8),  # schwa: reduced in running speech
-    "ER": (_v(jaw_open=0.51, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
-    "EH": (_v(jaw_open=0.77, lip_wide=0.35), 2.0, 1.2),
-    "IY": (_v(jaw_open=0.32, lip_wide=0.85), 2.0, 2.0),
-    "IH": (_v(jaw_open=0.53, lip_wide=0.55), 2.0, 1.5),
-    "AO": (_v(jaw_open=1.0, lip_round=0.55), 2.0, 2.0),
-    "OW": (_v(jaw_open=0.69, lip_round=0.7), 2.0, 2.5),
-    "UH": (_v(jaw_open=0.27, lip_round=0.6), 2.0, 2.5),
-    "UW": (_v(jaw_open=0.135, lip_round=1.0), 2.0, 3.5),
+    "AA": (_v(jaw_open=0.87, lip_wide=0.1), 2.5, 1.0),
+    "AE": (_v(jaw_open=0.87, lip_wide=0.3), 2.5, 1.0),
+    "AH": (_v(jaw_open=0.29), 2.0, 0.8),  # schwa: reduced in running speech
+    "ER": (_v(jaw_open=0.59, lip_round=0.3, lip_funnel=0.25), 2.0, 1.5),
+    "EH": (_v(jaw_open=0.89, lip_wide=0.35), 2.0, 1.2),
+    "IY": (_v(jaw_open=0.37, lip_wide=0.85), 2.0, 2.0),
+    "IH": (_v(jaw_open=0.61, lip_wide=0.55), 2.0, 1.5),
+    "AO": (_v(jaw_open=0.87, lip_round=0.55), 2.0, 2.0),
+    "OW": (_v(jaw_open=0.79, lip_round=0.7), 2.0, 2.5),
+    "UH": (_v(jaw_open=0.31, lip_round=0.6), 2.0, 2.5),
+    "UW": (_v(jaw_open=0.155, lip_round=1.0), 2.0, 3.5),
 }
 
 # Rounded lips are pursed: a viseme's lips part the less the more it rounds, whatever the jaw does (GRID's
