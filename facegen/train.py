@@ -18,9 +18,10 @@ the per-epoch loss history, training time, split).
 Speed on CPU: fused Adam, gradients freed rather than zeroed, denormals flushed (Adam's second moments
 of the zero-initialised output layer otherwise fall into slow denormal arithmetic), the big per-step
 buffers kept in the heap (see _reuse_heap), features computed once and cached, targets read from
-memory-mapped .npy files as contiguous float32. On a machine shared with other jobs, set
-OMP_WAIT_POLICY=PASSIVE before starting (spinning OpenMP threads on busy cores made 2-thread steps 3-5x
-slower than 1-thread ones in our measurements) or train with threads=1.
+memory-mapped .npy files as contiguous float32. Threads: spinning OpenMP threads on busy cores made
+2-thread steps 3-5x slower than 1-thread ones, and sleeping ones (OMP_WAIT_POLICY=PASSIVE) made them 3.7x
+slower even on idle cores (benchmarks/bench_train.py, 2 cores: 1 thread 16.1 sequences/s, 2 passive 4.3,
+2 spinning 17.9); so `facegen train` sets PASSIVE and trains on 1 thread unless told otherwise.
 """
 
 from __future__ import annotations

@@ -68,7 +68,9 @@ def info(bundle, as_json):
 @click.option("--precision", type=click.Choice(["fp32", "fp16", "int8"]), default=TrainConfig.precision,
               show_default=True,
               help="How the bundle stores its weights.")
-@click.option("--threads", type=click.IntRange(1, 1024), help="CPU threads for torch (default: all cores).")
+@click.option("--threads", type=click.IntRange(1, 1024),
+              help="CPU threads for torch (default: 1 while OpenMP threads sleep between steps, "
+              "OMP_WAIT_POLICY=PASSIVE, facegen's setting; all cores with OMP_WAIT_POLICY=ACTIVE).")
 @click.option("--strict", is_flag=True,
               help="Refuse to train when a sequence is missing or corrupt (default: skip it).")
 @click.option("--output-layer", "output_layer", type=click.Choice(OUTPUT_LAYERS), default=TrainConfig.output,
@@ -98,6 +100,8 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
     import os
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # busy-waiting OpenMP threads stall on shared cores
+    if threads is None and os.environ["OMP_WAIT_POLICY"].upper() == "PASSIVE":
+        threads = 1  # sleeping OpenMP threads: 2 made epochs 3.7x slower than 1 (benchmarks/bench_train.py)
     from facegen.train import train as run
 
     chosen = splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
