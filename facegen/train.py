@@ -101,7 +101,11 @@ def _reuse_heap() -> Iterator[None]:
 
 @contextlib.contextmanager
 def torch_settings(threads: int | None) -> Iterator[None]:
-    """Deterministic algorithms, flushed denormals, the thread count and heap reuse, restored afterwards."""
+    """Deterministic algorithms, flushed denormals, the thread count and heap reuse, restored afterwards.
+    `threads` None: 1 while OpenMP threads sleep between steps (OMP_WAIT_POLICY=PASSIVE, see above), else all
+    cores."""
+    if threads is None and os.environ.get("OMP_WAIT_POLICY", "").upper() == "PASSIVE":
+        threads = 1
     deterministic = torch.are_deterministic_algorithms_enabled()
     warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
     torch.use_deterministic_algorithms(True, warn_only=True)
@@ -268,12 +272,12 @@ def train(
     """Train the model `config` describes (default: the paper's setup) on the dataset at `data_root`;
     write the best epoch's weights as a bundle to `out_bundle`.
 
-    The rest is how the run happens: `device` (auto, cpu, cuda) and `threads` (torch's CPU threads, None:
-    all cores); `resume` continues from the checkpoint in `checkpoint_dir` (default:
-    default_checkpoint_dir); `cache_dir` holds the dataset's features (default: the dataset's own);
+    The rest is how the run happens: `device` (auto, cpu, cuda) and `threads` (torch's CPU threads, None: all
+    cores, or 1 under OMP_WAIT_POLICY=PASSIVE); `resume` continues from the checkpoint in `checkpoint_dir`
+    (default: default_checkpoint_dir); `cache_dir` holds the dataset's features (default: the dataset's own);
     `text_model_path` is where the text model's files are; `on_bad` "skip" reports and skips unusable
-    sequences, "fail" stops at the first; `reporter` (default: on stderr) gets the progress messages and
-    bars, and the skipped sequences as its notes (Reporter.stderr(quiet=True): notes only).
+    sequences, "fail" stops at the first; `reporter` (default: on stderr) gets the progress messages and bars,
+    and the skipped sequences as its notes (Reporter.stderr(quiet=True): notes only).
     """
     config = config or TrainConfig()
     config.check()

@@ -100,8 +100,6 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
     import os
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # busy-waiting OpenMP threads stall on shared cores
-    if threads is None and os.environ["OMP_WAIT_POLICY"].upper() == "PASSIVE":
-        threads = 1  # sleeping OpenMP threads: 2 made epochs 3.7x slower than 1 (benchmarks/bench_train.py)
     from facegen.train import train as run
 
     chosen = splits(train_subjects, test_subjects, train_sentences, val_sentences, test_sentences)
