@@ -17,7 +17,7 @@ inner-lip aperture 13-14, mouth width 61-291, jaw nose-to-chin, in cm on the iri
 MediaPipe (mediapipe==0.10.14, whose wheel ships the face models) lives in its own venv, `make faces-venv`:
 the tracker runs there (benchmarks/real_faces_track.py), everything else here in facegen's venv.
 
-    python benchmarks/real_faces.py [--model BUNDLE] [--name NAME] [--clips N] [--preview-colors]
+    python benchmarks/real_faces.py [--model BUNDLE] [--name NAME] [--clips N] [--lit-cavity]
 
 writes benchmarks/results/real_faces_NAME.json (NAME: the bundle's file name without extension) and prints
 the table of docs/real_faces.md. Importable: `run(...)` returns the same dict.
@@ -62,7 +62,6 @@ RESULTS = HERE / "results"
 TRACKER = HERE / "real_faces_track.py"
 FACES_VENV = REPO / ".venv-faces"
 SIZE = 512  # px, the render (the front view only)
-DARK_CAVITY = (0.04, 0.02, 0.02)  # sRGB of the mouth cavity in the measuring render (see render_frames)
 
 # GRID's file names spell the sentence: command, colour, preposition, letter, digit, adverb
 _GRID = (
@@ -146,20 +145,23 @@ def extract_audio(video: Path, wav: Path) -> None:
         raise SystemExit(f"ffmpeg could not read the audio of {video}: {proc.stderr[-500:]!r}")
 
 
-def render_frames(anim, out: Path, preview_colors: bool) -> None:
+def render_frames(anim, out: Path, lit_cavity: bool) -> None:
     """The animation's front view, RGB [T, SIZE, SIZE, 3] uint8, into the .npy `out` (no video codec between
-    the render and the tracker). The mouth cavity is drawn dark, as a real mouth's inside looks on video (in
-    shadow): in facegen's preview colours (`preview_colors`) it is a lit dark red that the tracker takes for
-    lip, and reads a mouth open by 5 mm as closed."""
-    from facegen.render.raster import Renderer, face_colors
+    the render and the tracker), drawn as `facegen render` draws it: the face and its parts (eyes, teeth,
+    tongue), the mouth's inside in shadow (render.scene.CAVITY_SHADE). `lit_cavity`: the cavity lit, as
+    releases before 2026-12-07 drew it (the tracker then takes it for lip and misses small openings)."""
+    from facegen.render.raster import Renderer
+    from facegen.render.scene import CAVITY_SHADE, Scene
 
-    renderer = Renderer(anim.faces, anim.template, SIZE, ("front",))
-    colors = face_colors(anim.regions, anim.num_vertices)
-    if not preview_colors and colors is not None and "mouth_cavity" in anim.regions:
-        colors[np.asarray(anim.regions["mouth_cavity"])] = DARK_CAVITY
+    scene = Scene(anim, parts=True)
+    renderer = Renderer(scene.faces, scene.template, SIZE, ("front",))
+    colors = scene.colors
+    if lit_cavity and colors is not None and "mouth_cavity" in anim.regions:
+        colors = colors.copy()
+        colors[np.asarray(anim.regions["mouth_cavity"])] /= CAVITY_SHADE
     frames = np.lib.format.open_memmap(out, "w+", np.uint8, (anim.num_frames, SIZE, SIZE, 3))
     for t in range(anim.num_frames):
-        renderer.render_into(np.asarray(anim.vertices[t]), frames[t], colors)
+        renderer.render_into(scene.points(np.asarray(anim.vertices[t]), t), frames[t], colors)
     frames.flush()
     del frames
 
@@ -261,7 +263,7 @@ def run(
     *,
     data: Path = DATA,
     clips: int | None = None,
-    preview_colors: bool = False,
+    lit_cavity: bool = False,
     speaker=None,
     log=print,
 ) -> dict:
@@ -293,7 +295,7 @@ def run(
             # and no head motion (the render does not turn the head; the tracker's scale would follow it)
             anim = animator.animate(wav, text=text, speaker=speaker, blink_rate=0, head_motion=0)
             frames = tmp / f"{name}_facegen.npy"
-            render_frames(anim, frames, preview_colors)
+            render_frames(anim, frames, lit_cavity)
             geo = geometric_aperture(np.asarray(anim.vertices), face)
             made.append(
                 (
@@ -327,7 +329,7 @@ def run(
     return _round(
         {
             "model": str(model or "built-in (facegen/models/default.safetensors)"),
-            "colors": "preview" if preview_colors else "dark mouth cavity",
+            "render": "face and parts, cavity " + ("lit" if lit_cavity else "in shadow"),
             "closed_cm": CLOSED_CM,
             "open_cm": OPEN_CM,
             "seconds": time.perf_counter() - start,
@@ -349,14 +351,14 @@ def main(argv=None) -> None:
     ap.add_argument("--clips", type=int, help="measure only the first N clips")
     ap.add_argument("--speaker", help="the model's speaker (default: the model's default)")
     ap.add_argument(
-        "--preview-colors",
+        "--lit-cavity",
         action="store_true",
-        help="render with facegen's preview colours (the tracker then misses small openings)",
+        help="draw the mouth cavity lit, as releases before 2026-12-07 did (the tracker misses openings)",
     )
     args = ap.parse_args(argv)
     name = args.name or (Path(args.model).stem if args.model else "default")
     result = run(
-        args.model, data=args.data, clips=args.clips, preview_colors=args.preview_colors, speaker=args.speaker
+        args.model, data=args.data, clips=args.clips, lit_cavity=args.lit_cavity, speaker=args.speaker
     )
     RESULTS.mkdir(parents=True, exist_ok=True)
     out = RESULTS / f"real_faces_{name}.json"

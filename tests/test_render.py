@@ -16,7 +16,8 @@ from facegen.exchange import write_animation
 from facegen.face.mesh import Mesh, write_mesh
 from facegen.render import render, render_animation, render_still
 from facegen.render.overlay import TEXT, compare_overlay
-from facegen.render.raster import BACKGROUND, Renderer, face_colors, frame_cameras, heat_colors
+from facegen.render.raster import BACKGROUND, Renderer, frame_cameras, heat_colors
+from facegen.render.scene import picture_colors
 from facegen.runtime import SILENT
 
 FPS = 25.0
@@ -357,7 +358,7 @@ def test_still_png_and_identical_renders(grid_mesh, tmp_path):
     reader = imageio_ffmpeg.read_frames(str(path))
     assert tuple(next(reader)["size"]) == (2 * SIZE, SIZE)
     image = np.frombuffer(next(reader), np.uint8).reshape(SIZE, 2 * SIZE, 3)
-    colors = face_colors(grid_mesh.regions, grid_mesh.num_vertices)  # the grid names a lips region: tinted
+    colors = picture_colors(grid_mesh.faces, grid_mesh.regions, grid_mesh.num_vertices)  # names lips: tinted
     assert colors is not None
     direct = Renderer(grid_mesh.faces, grid_mesh.vertices, SIZE).render(grid_mesh.vertices, colors)
     assert np.array_equal(image, direct)  # PNG is lossless

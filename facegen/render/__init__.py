@@ -36,11 +36,10 @@ from facegen.render.raster import (
     Renderer,
     check_size,
     check_views,
-    face_colors,
     heat_colors,
     render_image,
 )
-from facegen.render.scene import Scene
+from facegen.render.scene import Scene, picture_colors
 from facegen.render.video import check_output, clip_audio, encode, frames_in_order
 from facegen.runtime import BARS, Reporter, cores
 
@@ -344,7 +343,8 @@ def render_still(
             raise FacegenError(f"frame {frame} is outside the clip's 0..{input.num_frames - 1}")
         scene = Scene(input)
         vertices, faces, template = _posed(input, frame, scene), scene.faces, scene.template
-    colors = scene.colors if not isinstance(input, Mesh) else face_colors(input.regions, len(vertices))
+    colors = (scene.colors if not isinstance(input, Mesh)
+              else picture_colors(input.faces, input.regions, len(vertices)))
     image = render_image(vertices, faces, template, size=size, views=check_views(views), colors=colors)
     with atomic_path(path) as tmp:
         Image.fromarray(image).save(tmp, "PNG")

@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from facegen.errors import FacegenError
-from facegen.face.materials import MATERIALS, REGION_MATERIALS, srgb_to_linear
+from facegen.face.materials import MATERIALS, srgb_to_linear
 from facegen.face.mesh import vertex_normals
 
 VIEWS: dict[str, float] = {"front": 0.0, "three_quarter": 40.0, "profile": 90.0}  # yaw, degrees
@@ -45,7 +45,6 @@ DEFAULT_VIEWS = ("front", "three_quarter")
 FIELD_OF_VIEW = 20.0  # degrees, vertical and horizontal (square views)
 FILL = 0.84  # the template fills this fraction of a view's width or height
 SKIN = MATERIALS["Skin"].srgb  # sRGB, from the one materials table (face/materials.py)
-REGION_COLORS = {region: MATERIALS[name].srgb for region, name in REGION_MATERIALS.items()}  # sRGB
 BACKGROUND = (0.08, 0.09, 0.11)  # sRGB
 HEAT_STOPS = ((0.78, 0.80, 0.84), (0.99, 0.87, 0.33), (0.96, 0.50, 0.12), (0.78, 0.07, 0.07))  # sRGB, 0 → 1
 # lights in view space (x right, y up, z towards the viewer): direction, intensity
@@ -316,19 +315,6 @@ def _shade(
 
 
 # ---------------------------------------------------------------------------------------------- colours
-
-
-def face_colors(regions: dict[str, np.ndarray] | None, num_vertices: int) -> np.ndarray | None:
-    """Per-vertex sRGB colours: skin, with lips, eyeballs and mouth cavity tinted when the mesh names them
-    (facegen's procedural face does; BIWI-topology bundles name only lips and upper face)."""
-    named = [(k, v) for k, v in (regions or {}).items() if k in REGION_COLORS]
-    if not named:
-        return None
-    colors = np.tile(np.asarray(SKIN, np.float32), (num_vertices, 1))
-    for name, idx in named:
-        idx = np.asarray(idx)
-        colors[idx[(idx >= 0) & (idx < num_vertices)]] = REGION_COLORS[name]
-    return colors
 
 
 def _srgb_table(n: int = 4096) -> np.ndarray:
