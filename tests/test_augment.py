@@ -185,3 +185,33 @@ def test_augment_with_nothing_drawn_returns_the_clip():
     x = _speechlike()
     y, scale, info = A.augment(x, SR, 0, none)
     assert np.array_equal(x, y) and scale == 1.0 and info == {}
+
+
+def test_loudness_drift_declines_and_swells_slowly_within_its_limits():
+    """The gain it lays on the speech: the drawn declination from start to end, swells of a few dB, no step
+    faster than a syllable's, never beyond DRIFT_LIMIT_DB; the timing untouched; deterministic per seed."""
+    x = _speechlike(4.0)
+    declinations = []
+    for seed in range(12):
+        y, info = A.loudness_drift(x, SR, seed, p=1.0)
+        assert info is not None and y.dtype == np.float32 and len(y) == len(x)
+        assert A.DECLINATION_DB[0] <= info["declination_db"] <= A.DECLINATION_DB[1]
+        assert len(info["swells_db"]) == 9  # one knot per 0.5 s over 4 s, both ends included
+        on = np.abs(x) > 1e-3
+        gain_db = 20 * np.log10(np.abs(y[on]) / np.abs(x[on]))
+        assert np.abs(gain_db).max() <= A.DRIFT_LIMIT_DB + 1e-3
+        t = np.flatnonzero(on) / SR
+        step = np.abs(np.diff(np.interp(np.arange(0.35, 3.65, 0.01), t, gain_db)))
+        assert step.max() < 1.0  # dB per 10 ms: slow, a loudness contour rather than a tremolo
+        # at the knots (every 0.5 s) the gain is the declination's ramp plus that knot's swell
+        swells = np.asarray(info["swells_db"])
+        at = np.interp([0.5, 3.5], t, gain_db) - swells[[1, 7]]
+        assert at[1] - at[0] == pytest.approx(info["declination_db"] * 3 / 4, abs=0.1)
+        declinations.append(info["declination_db"])
+        assert np.corrcoef(np.abs(y), np.abs(x))[0, 1] > 0.8  # the same sound, only louder or softer
+    assert min(declinations) < -5 and max(declinations) > -2  # drawn over the range
+    a, info_a = A.loudness_drift(x, SR, np.random.default_rng(3), p=1.0)
+    b, info_b = A.loudness_drift(x, SR, 3, p=1.0)
+    assert np.array_equal(a, b) and info_a == info_b
+    kept, none = A.loudness_drift(x, SR, 3, p=0.0)
+    assert none is None and np.array_equal(kept, x)

@@ -1,6 +1,7 @@
 """Acoustic augmentation of mono float32 speech, so a model trained on synthetic voices hears what
-recordings sound like: pitch and formant (vocal-tract length) shifts, tempo, additive noise, room
-reverberation, band limits, lossy codec round trips and level. Each step is a function; `augment` draws a
+recordings sound like: the speaker's loudness drifting (`loudness_drift`, drawn apart from the chain: the
+training motion's prosody follows it), pitch and formant (vocal-tract length) shifts, tempo, additive noise,
+room reverberation, band limits, lossy codec round trips and level. Each step is a function; `augment` draws a
 random chain of them from an `AugmentSpec` with a numpy Generator, deterministically for a given seed.
 
 Only `tempo` changes durations: it returns the factor by which phone and word times scale. Every other step
@@ -248,6 +249,42 @@ def _soft_limit(x: np.ndarray, knee: float = 0.7, ceiling: float = 0.99) -> np.n
     over = mag > knee
     mag[over] = knee + (ceiling - knee) * np.tanh((mag[over] - knee) / (ceiling - knee))
     return np.sign(x) * mag
+
+
+# The speaker's loudness drifts: real speech grows quieter toward a phrase's end (declination) and swells
+# and fades with emphasis and the distance to the microphone, by several dB. Synthetic voices hold their
+# level, so a model trained on them read a quiet phrase-final syllable as a shut mouth (GRID's final "now":
+# 0.3 cm, where the rig opens 1.0 and the speakers 1.0-1.2; docs/real_faces.md). `loudness_drift` is drawn
+# before the training motion's loudness is taken, so the motion follows the drift only as the rig's prosody
+# does (facegen.synth.curves.PROSODY_GAIN: at most 35 % for 12 dB).
+DRIFT_P = 0.7  # share of takes that drift
+DECLINATION_DB = (-9.0, 2.0)  # level at the end against the start, drawn uniformly
+WOBBLE_DB = 3.0  # standard deviation of the slow swells, one knot per WOBBLE_S
+WOBBLE_S = 0.5
+DRIFT_LIMIT_DB = 12.0
+
+
+def loudness_drift(audio: np.ndarray, sr: int, rng: np.random.Generator | int,
+                   p: float = DRIFT_P) -> tuple[np.ndarray, dict | None]:
+    """`audio` under a slow random gain (with probability `p`): a linear declination of DECLINATION_DB over
+    the clip plus smooth swells (a natural cubic spline through knots WOBBLE_S apart, N(0, WOBBLE_DB)),
+    within +-DRIFT_LIMIT_DB. Returns (audio, the drift's parameters or None when none was drawn)."""
+    from scipy.interpolate import CubicSpline
+
+    rng = np.random.default_rng(rng)
+    audio = np.asarray(audio, dtype=np.float32)
+    if rng.random() >= p or len(audio) < 2:
+        return audio, None
+    duration = len(audio) / sr
+    declination = float(rng.uniform(*DECLINATION_DB))
+    knots = np.linspace(0.0, duration, max(2, int(np.ceil(duration / WOBBLE_S)) + 1))
+    swells = rng.normal(0.0, WOBBLE_DB, len(knots))
+    coarse = np.linspace(0.0, duration, max(2, int(duration * 100)) + 1)  # the gain at 100 Hz
+    curve = declination * coarse / duration + CubicSpline(knots, swells, bc_type="natural")(coarse)
+    curve = np.clip(curve, -DRIFT_LIMIT_DB, DRIFT_LIMIT_DB)
+    gain = 10.0 ** (np.interp(np.arange(len(audio)) / sr, coarse, curve) / 20.0)
+    return (audio * gain).astype(np.float32), {"declination_db": round(declination, 3),
+                                               "swells_db": [round(float(x), 3) for x in swells]}
 
 
 def augment(audio: np.ndarray, sr: int, rng: np.random.Generator | int,

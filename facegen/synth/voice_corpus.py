@@ -9,13 +9,14 @@ a second time by a HELD-OUT synthesiser (Flite's clustergen voices slt, rms, awb
 + XVOICE_OFFSET: the cross-voice test. Festival's HTS voice is left out of both (it is trained on the same
 ARCTIC speaker as flite:slt); flite:kal/kal16 are left out of the test (the speaker of festival:kal_diphone).
 
-Per sequence {subject}_e{N}: the audio after acoustic augmentation (facegen.synth.augment: pitch, formants,
-tempo, reverb, noise, band limits, codecs, level; wav/, 16-bit PCM at 16 kHz), the motion as rig curves
-(curves/{name}.npy, float32 [T, len(CHANNELS)] — posed on the fly by the dataset reader: 12 numbers per frame
-instead of 70,110), the words and phones with their times (alignments/{name}.json, in the augmented audio's
-time), the transcript (text/) and what made it (meta/{name}.json: voice, rate, style, augmentation).
-The curves follow the synthesiser's own phone timings and the clean speech's loudness (prosody: louder
-syllables open the jaw more; facegen.synth.curves.viseme_curves). Held out from every training sentence:
+Per sequence {subject}_e{N}: the audio after acoustic augmentation (facegen.synth.augment: the speaker's
+loudness drifting, pitch, formants, tempo, reverb, noise, band limits, codecs, level; wav/, 16-bit PCM at
+16 kHz), the motion as rig curves (curves/{name}.npy, float32 [T, len(CHANNELS)] — posed on the fly by the
+dataset reader: 12 numbers per frame instead of 70,110), the words and phones with their times
+(alignments/{name}.json, in the augmented audio's time), the transcript (text/) and what made it
+(meta/{name}.json: voice, rate, style, augmentation). The curves follow the synthesiser's own phone timings
+and the speech's loudness after its drift (prosody: louder syllables open the jaw more;
+facegen.synth.curves.viseme_curves). Held out from every training sentence:
 the HELD_OUT_LEXICON words (test-unseen sentences only).
 
 The root holds BIWI.ply (the neutral procedural face) with its regions, templates.pkl (each style's face),
@@ -40,9 +41,10 @@ from facegen.processes import process_pool
 from facegen.runtime import SILENT, Reporter, set_threads
 from facegen.synth.voices import CORPUS_LANGUAGES, FOREIGN_VARIANTS
 
-VERSION = 7  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
+VERSION = 8  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
 # 5: rounded lips pursed (facegen.synth.curves.ROUND_CLOSE); (6: a level contour, reverted); 7: the jaw
-# calibrated on running speech too (a real ARKit take: schwa reduced, open vowels wider, f/v lips to teeth)
+# calibrated on running speech too (a real ARKit take: schwa reduced, open vowels wider, f/v lips to teeth);
+# 8: the speaker's loudness drifts (facegen.synth.augment.loudness_drift)
 MANIFEST = "voices.json"
 RATE = 16000  # Hz of the stored audio (the model's)
 FPS = 25.0
@@ -163,7 +165,7 @@ def _words_of(text: str, utt) -> list[tuple[str, float, float]] | None:
 def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     """Synthesise, augment and rig one take; write its files; return its manifest entry."""
     from facegen.audio import num_frames, resample, write_wav
-    from facegen.synth.augment import augment
+    from facegen.synth.augment import augment, loudness_drift
     from facegen.synth.corpus import speaker_index
     from facegen.synth.curves import SpeakerStyle, loudness_envelope, motion_curves
     from facegen.synth.voices import synthesize
@@ -174,8 +176,13 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     if words is None or not utt.phones:
         raise FacegenError(f"{take.voice} gave no word or phone timings for e{take.sentence}")
     clean = resample(utt.audio, utt.sample_rate, RATE)
+    drift = None
+    if augmentation:  # the speaker's own loudness: the motion's prosody follows it
+        clean, drift = loudness_drift(clean, RATE, np.random.default_rng([take.seed, 2]))
     loud = loudness_envelope(clean, RATE)
     audio, scale, applied = augment(clean, RATE, take.seed) if augmentation else (clean, 1.0, {})
+    if drift is not None:
+        applied = {"loudness_drift": drift, **applied}
     if scale != 1.0:  # tempo: the loudness curve and every time stretch with the audio
         loud = np.interp(np.arange(int(np.ceil(len(loud) * scale))) / scale, np.arange(len(loud)), loud)
     words, phones = _scaled(words, scale), _scaled(utt.phones, scale)
