@@ -211,3 +211,37 @@ def test_foreign_phones_are_labelled_from_the_ipa():
     assert all(b1 <= a2 + 1e-6 for (_, _, b1), (_, a2, _) in zip(utt.phones, utt.phones[1:]))
     ru = synthesize("Мама мыла раму.", "espeak:ru+f2")
     assert [p for p, _, _ in ru.phones].count("M") == 4
+
+
+def test_pauses_move_the_timings_with_the_silence_they_insert():
+    """with_pauses: the speech's samples kept in order, silence exactly where it says, every word and phone
+    moved by the silence before it (a phone ending at the cut stays), and the rig's in-breath (the lips
+    parting before speech after a pause) in the motion of such a take."""
+    from facegen.synth.curves import PRE_SPEECH_S, viseme_curves
+
+    sr = 16000
+    speech = np.random.default_rng(0).uniform(0.1, 1.0, 2 * sr).astype(np.float32)
+    words = [("a", 0.0, 0.5), ("b", 0.6, 1.2), ("c", 1.3, 2.0)]
+    phones = [("AH", 0.0, 0.5), ("B", 0.6, 0.7), ("IY", 0.7, 1.2), ("S", 1.3, 1.5), ("IY", 1.5, 2.0)]
+    seen_pause = seen_lead = 0
+    for seed in range(20):
+        audio, w, p, info = vc.with_pauses(speech, sr, words, phones, np.random.default_rng(seed))
+        lead, trail = info["lead_s"], info["trail_s"]
+        pause = info.get("pause", {"at_s": 9.0, "s": 0.0})
+        assert abs(len(audio) - len(speech) - (lead + trail + pause["s"]) * sr) <= 3  # info rounds to 0.1 ms
+        assert np.array_equal(audio[audio != 0], speech)  # the speech, whole and in order
+        for (_, s0, e0), (_, s1, e1) in zip(phones, p, strict=True):
+            assert s1 == pytest.approx(s0 + lead + (pause["s"] if s0 >= pause["at_s"] else 0), abs=1e-4)
+            assert e1 == pytest.approx(e0 + lead + (pause["s"] if e0 > pause["at_s"] else 0), abs=1e-4)
+            assert audio[int(s1 * sr) + 5] != 0 and audio[int(e1 * sr) - 5] != 0  # still on the speech
+        assert [x[0] for x in w] == ["a", "b", "c"] and w[0][1] == pytest.approx(lead, abs=1e-4)
+        if "pause" in info:
+            assert pause["at_s"] in (0.6, 1.3) and 0.3 <= pause["s"] <= 0.9
+            gap = round(pause["at_s"] * sr) + round(lead * sr)
+            assert not audio[gap + 2: gap + round(pause["s"] * sr) - 2].any()
+            seen_pause += 1
+        if lead >= PRE_SPEECH_S + 0.3:  # the jaw opens in the in-breath before the first sound, rests before
+            jaw = viseme_curves(p, int(len(audio) / sr * 25), 25.0, alphabet="cmu")[:, 0]
+            assert jaw[0] < 0.02 and jaw[int(lead * 25) - 2] > 0.1
+            seen_lead += 1
+    assert 3 <= seen_pause <= 17 and seen_lead >= 5  # drawn, not always

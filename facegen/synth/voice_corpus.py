@@ -9,15 +9,15 @@ a second time by a HELD-OUT synthesiser (Flite's clustergen voices slt, rms, awb
 + XVOICE_OFFSET: the cross-voice test. Festival's HTS voice is left out of both (it is trained on the same
 ARCTIC speaker as flite:slt); flite:kal/kal16 are left out of the test (the speaker of festival:kal_diphone).
 
-Per sequence {subject}_e{N}: the audio after acoustic augmentation (facegen.synth.augment: the speaker's
-loudness drifting, pitch, formants, tempo, reverb, noise, band limits, codecs, level; wav/, 16-bit PCM at
-16 kHz), the motion as rig curves (curves/{name}.npy, float32 [T, len(CHANNELS)] — posed on the fly by the
-dataset reader: 12 numbers per frame instead of 70,110), the words and phones with their times
-(alignments/{name}.json, in the augmented audio's time), the transcript (text/) and what made it
-(meta/{name}.json: voice, rate, style, augmentation). The curves follow the synthesiser's own phone timings
-and the speech's loudness after its drift (prosody: louder syllables open the jaw more;
-facegen.synth.curves.viseme_curves). Held out from every training sentence:
-the HELD_OUT_LEXICON words (test-unseen sentences only).
+Per sequence {subject}_e{N}: the audio with pauses (`with_pauses`: silence before the sentence, at a word
+boundary and after it), after acoustic augmentation (facegen.synth.augment: the speaker's loudness drifting,
+pitch, formants, tempo, reverb, noise, band limits, codecs, level; wav/, 16-bit PCM at 16 kHz), the motion as
+rig curves (curves/{name}.npy, float32 [T, len(CHANNELS)] — posed on the fly by the dataset reader: 12
+numbers per frame instead of 70,110), the words and phones with their times (alignments/{name}.json, in the
+augmented audio's time), the transcript (text/) and what made it (meta/{name}.json: voice, rate, style,
+augmentation). The curves follow the synthesiser's own phone timings moved by the pauses and the speech's
+loudness after its drift (prosody: louder syllables open the jaw more; facegen.synth.curves.viseme_curves).
+Held out from every training sentence: the HELD_OUT_LEXICON words (test-unseen sentences only).
 
 The root holds BIWI.ply (the neutral procedural face) with its regions, templates.pkl (each style's face),
 sentences.txt and voices.json, the manifest (parameters and finished sequences): a rerun with the same
@@ -44,7 +44,8 @@ from facegen.synth.voices import CORPUS_LANGUAGES, FOREIGN_VARIANTS
 VERSION = 8  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
 # 5: rounded lips pursed (facegen.synth.curves.ROUND_CLOSE); (6: a level contour, reverted); 7: the jaw
 # calibrated on running speech too (a real ARKit take: schwa reduced, open vowels wider, f/v lips to teeth);
-# 8: the speaker's loudness drifts (facegen.synth.augment.loudness_drift)
+# 8: pauses before, inside and after a sentence (with_pauses), the speaker's loudness drifts
+# (facegen.synth.augment.loudness_drift)
 MANIFEST = "voices.json"
 RATE = 16000  # Hz of the stored audio (the model's)
 FPS = 25.0
@@ -162,6 +163,46 @@ def _words_of(text: str, utt) -> list[tuple[str, float, float]] | None:
     return [(w, a, b) for w, (_, a, b) in zip(written, utt.words, strict=True)]
 
 
+# Pauses. Synthesisers start speaking at once and rarely stop inside a sentence, so the training motion never
+# held the in-breath, the lips parting before speech after a pause (facegen.synth.curves: PRE_SPEECH_S,
+# PAUSE_S), that real speakers make; the model trained on them kept the lips shut there, and on GRID's real
+# speakers the rig without it follows them at r 0.69 instead of 0.74 (docs/real_faces.md). A take now
+# starts with LEAD_S of silence (with probability P_LEAD), may pause MID_S at one word boundary (P_MID) and
+# ends with up to TRAIL_S.
+P_LEAD, LEAD_S = 0.8, (0.1, 1.0)
+P_MID, MID_S = 0.5, (0.3, 0.9)
+TRAIL_S = (0.0, 0.5)
+
+
+def with_pauses(audio: np.ndarray, sr: int, words: list, phones: list, rng: np.random.Generator
+                ) -> tuple[np.ndarray, list, list, dict]:
+    """`audio` with silence before it, at one word boundary and after it (drawn as P_LEAD / LEAD_S, P_MID /
+    MID_S, TRAIL_S), and the words' and phones' (text, start, end) moved with it; what was inserted (s)."""
+    lead = float(rng.uniform(*LEAD_S)) if rng.random() < P_LEAD else 0.0
+    cuts = [(0.0, round(lead * sr))]
+    if len(words) > 1 and rng.random() < P_MID:
+        at = float(words[int(rng.integers(1, len(words)))][1])
+        cuts.append((at, round(float(rng.uniform(*MID_S)) * sr)))
+    trail = round(float(rng.uniform(*TRAIL_S)) * sr)
+    pieces, last = [], 0
+    for at, n in cuts:
+        i = min(round(at * sr), len(audio))
+        pieces += [audio[last:i], np.zeros(n, audio.dtype)]
+        last = i
+    pieces += [audio[last:], np.zeros(trail, audio.dtype)]
+
+    def moved(t: float, end: bool) -> float:  # a time after (an end: after or at) a cut moves by its silence
+        return t + sum(n for at, n in cuts if (t > at if end else t >= at)) / sr
+
+    def shift(timings):
+        return [(str(x), moved(float(a), False), moved(float(b), True)) for x, a, b in timings]
+
+    inserted = {"lead_s": round(cuts[0][1] / sr, 4), "trail_s": round(trail / sr, 4)}
+    if len(cuts) > 1:
+        inserted["pause"] = {"at_s": round(cuts[1][0], 4), "s": round(cuts[1][1] / sr, 4)}
+    return np.concatenate(pieces), shift(words), shift(phones), inserted
+
+
 def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     """Synthesise, augment and rig one take; write its files; return its manifest entry."""
     from facegen.audio import num_frames, resample, write_wav
@@ -176,16 +217,19 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     if words is None or not utt.phones:
         raise FacegenError(f"{take.voice} gave no word or phone timings for e{take.sentence}")
     clean = resample(utt.audio, utt.sample_rate, RATE)
-    drift = None
-    if augmentation:  # the speaker's own loudness: the motion's prosody follows it
+    phones, speaker_changes = utt.phones, {}
+    if augmentation:  # the speaker's pauses and own loudness: the motion follows both
+        clean, words, phones, speaker_changes["pauses"] = with_pauses(
+            clean, RATE, words, phones, np.random.default_rng([take.seed, 3]))
         clean, drift = loudness_drift(clean, RATE, np.random.default_rng([take.seed, 2]))
+        if drift is not None:
+            speaker_changes["loudness_drift"] = drift
     loud = loudness_envelope(clean, RATE)
     audio, scale, applied = augment(clean, RATE, take.seed) if augmentation else (clean, 1.0, {})
-    if drift is not None:
-        applied = {"loudness_drift": drift, **applied}
+    applied = {**speaker_changes, **applied}
     if scale != 1.0:  # tempo: the loudness curve and every time stretch with the audio
         loud = np.interp(np.arange(int(np.ceil(len(loud) * scale))) / scale, np.arange(len(loud)), loud)
-    words, phones = _scaled(words, scale), _scaled(utt.phones, scale)
+    words, phones = _scaled(words, scale), _scaled(phones, scale)
     frames = num_frames(len(audio) / RATE, FPS)
     style = SpeakerStyle.for_speaker(speaker_index(take.subject))
     curves = motion_curves(phones, [Word(*w) for w in words], frames, FPS, style,
