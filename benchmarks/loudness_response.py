@@ -48,7 +48,8 @@ def word_gain(audio: np.ndarray, sr: int, start: float, end: float, db: float) -
     return np.clip(audio * 10.0 ** (db * inside / 20.0), -1.0, 1.0).astype(np.float32)
 
 
-def rig_aperture(phones, num_frames: int, fps: float, loudness: np.ndarray, speaker: int) -> np.ndarray:
+def rig_aperture(phones, num_frames: int, fps: float, loudness: np.ndarray, speaker: str | None
+                 ) -> np.ndarray:
     """The rig's aperture (cm) for `phones` (CMU) under `loudness`, in the model's speaker's motion style."""
     from facegen.face.rig import CHANNELS, LOWER_CHANNELS
     from facegen.face.template import load_template
