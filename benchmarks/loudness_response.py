@@ -48,24 +48,6 @@ def word_gain(audio: np.ndarray, sr: int, start: float, end: float, db: float) -
     return np.clip(audio * 10.0 ** (db * inside / 20.0), -1.0, 1.0).astype(np.float32)
 
 
-def rig_aperture(phones, num_frames: int, fps: float, loudness: np.ndarray, speaker: str | None
-                 ) -> np.ndarray:
-    """The rig's aperture (cm) for `phones` (CMU) under `loudness`, in the model's speaker's motion style."""
-    from facegen.face.rig import CHANNELS, LOWER_CHANNELS
-    from facegen.face.template import load_template
-    from facegen.lipsync import FaceGeometry, aperture
-    from facegen.synth.corpus import speaker_index
-    from facegen.synth.curves import SpeakerStyle, viseme_curves
-    from facegen.synth.reference import _template_rig
-
-    rig = _template_rig()
-    style = SpeakerStyle.for_speaker(speaker_index(speaker)) if speaker else None
-    lower = viseme_curves(phones, num_frames, fps, style, alphabet="cmu", loudness=loudness)
-    weights = np.zeros((num_frames, len(CHANNELS)))
-    weights[:, : len(LOWER_CHANNELS)] = lower
-    return aperture(rig.pose(weights), FaceGeometry.of(load_template()))
-
-
 def _peak(curve: np.ndarray, start: float, end: float, fps: float) -> float:
     a, b = int(np.floor(start * fps)), int(np.ceil(end * fps)) + 1
     return float(np.max(curve[max(a, 0): max(b, a + 1)]))
@@ -76,7 +58,9 @@ def run(model=None, *, data: Path = DATA, clips: int | None = None, log=print) -
     from facegen.align import align_phones
     from facegen.audio import load_audio, write_wav
     from facegen.lipsync import FaceGeometry, aperture
-    from facegen.synth.curves import loudness_envelope
+    from facegen.synth.corpus import speaker_index
+    from facegen.synth.curves import SpeakerStyle, loudness_envelope
+    from facegen.synth.reference import rig_reference
 
     videos = sorted(data.glob("*.mpg"))[:clips]
     if not videos:
@@ -85,6 +69,7 @@ def run(model=None, *, data: Path = DATA, clips: int | None = None, log=print) -
     animator = facegen.Animator(model)
     face = FaceGeometry.of(animator.mesh())
     speaker = animator.bundle.speakers[0]
+    style = SpeakerStyle.for_speaker(speaker_index(speaker))  # the rig moves as the model's speaker
     per_clip = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -102,8 +87,8 @@ def run(model=None, *, data: Path = DATA, clips: int | None = None, log=print) -
                 write_wav(louder, sr, path)
                 anim = animator.animate(path, text=text, blink_rate=0, head_motion=0)
                 model_ap = aperture(np.asarray(anim.vertices), face)
-                rig_ap = rig_aperture(phones, anim.num_frames, float(anim.fps), loudness_envelope(louder, sr),
-                                      speaker)
+                rig_ap = aperture(rig_reference(phones, [], anim.num_frames, float(anim.fps), alphabet="cmu",
+                                                loudness=loudness_envelope(louder, sr), style=style), face)
                 row[f"{db:+.0f}dB"] = {"model_cm": _peak(model_ap, last.start, last.end, float(anim.fps)),
                                        "rig_cm": _peak(rig_ap, last.start, last.end, float(anim.fps))}
             base = row["+0dB"]

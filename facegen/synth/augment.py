@@ -252,11 +252,12 @@ def _soft_limit(x: np.ndarray, knee: float = 0.7, ceiling: float = 0.99) -> np.n
 
 
 # The speaker's loudness drifts: real speech grows quieter toward a phrase's end (declination) and swells
-# and fades with emphasis and the distance to the microphone, by several dB. Synthetic voices hold their
-# level, so a model trained on them read a quiet phrase-final syllable as a shut mouth (GRID's final "now":
-# 0.3 cm, where the rig opens 1.0 and the speakers 1.0-1.2; docs/real_faces.md). `loudness_drift` is drawn
-# before the training motion's loudness is taken, so the motion follows the drift only as the rig's prosody
-# does (facegen.synth.curves.PROSODY_GAIN: at most 35 % for 12 dB).
+# and fades with emphasis and the distance to the microphone, by several dB; synthetic voices hold their
+# level. (One GRID clip's quiet final "now" came out nearly shut from a model trained without it; over the
+# 11 clips the model followed a word's loudness no more than the rig does: benchmarks/loudness_response.py,
+# docs/real_faces.md.) `loudness_drift` is drawn before the training motion's loudness is taken, so the
+# motion follows the drift only as the rig's prosody does (facegen.synth.curves.PROSODY_GAIN: at most 35 %
+# for 12 dB).
 DRIFT_P = 0.7  # share of takes that drift
 DECLINATION_DB = (-9.0, 2.0)  # level at the end against the start, drawn uniformly
 WOBBLE_DB = 3.0  # standard deviation of the slow swells, one knot per WOBBLE_S
