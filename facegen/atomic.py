@@ -19,6 +19,7 @@ import errno
 import hashlib
 import os
 import re
+import secrets
 import shutil
 import socket
 import tempfile
@@ -231,18 +232,8 @@ class Transaction:
         check_writable(target)
         folder = _folder(target)
         remove_stale_temporaries(folder)
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=target.suffix, dir=folder)
-        except OSError as exc:
-            full = disk_full_error(target, exc)
-            if full is not None:
-                raise full from exc
-            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another output path",
-                               param="path") from exc
-        os.close(fd)
-        temp = Path(tmp)
+        temp = self._new_temp("file", target, target, _create_file)
         temp.unlink()  # writers (pxr, soundfile, ...) create the file themselves
-        self._root._staged.append(_Staged("file", target, temp))
         return temp
 
     def folder(self, target: str | os.PathLike) -> Path:
@@ -253,27 +244,36 @@ class Transaction:
             raise FacegenError(f"{target} is a file, so facegen cannot write the folder there: rename or "
                                "remove it, or choose another output name", param="path")
         check_writable(_folder(target) / f"{target.name}.new")  # a writable parent, a name not too long
-        temp = self._mkdtemp(target)
-        self._root._staged.append(_Staged("folder", target, temp))
-        return temp
+        return self._new_temp("folder", target, target, os.mkdir)
 
     def scratch(self, near: str | os.PathLike) -> Path:
         """A new temporary folder beside `near` for intermediate files, removed when this transaction ends."""
-        temp = self._mkdtemp(Path(near))
-        self._root._staged.append(_Staged("scratch", Path(near), temp))
-        return temp
+        return self._new_temp("scratch", Path(near), Path(near), os.mkdir)
 
     def remove(self, path: str | os.PathLike) -> None:
         """Remove `path` (an outdated file or folder of the asset) at the commit, not before."""
         self._root._staged.append(_Staged("remove", Path(path)))
 
-    def _mkdtemp(self, target: Path) -> Path:
-        folder = _folder(target)
-        try:
-            return Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=folder))
-        except OSError as exc:
-            raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another output path",
-                               param="path") from exc
+    def _new_temp(self, kind: str, target: Path, near: Path, make) -> Path:
+        """A new temporary path beside `near` (`make(path)` creates it: a file keeps `near`'s suffix), staged
+        before it exists: an interrupt (Ctrl-C) at any moment leaves nothing behind."""
+        folder = _folder(near)
+        suffix = near.suffix if kind == "file" else ""
+        while True:
+            staged = _Staged(kind, target, folder / f"{temp_prefix(near)}{secrets.token_hex(4)}{suffix}")
+            self._root._staged.append(staged)
+            try:
+                make(staged.temp)
+                return staged.temp
+            except FileExistsError:
+                self._root._staged.remove(staged)
+            except OSError as exc:
+                self._root._staged.remove(staged)
+                full = disk_full_error(target, exc)
+                if full is not None:
+                    raise full from exc
+                raise FacegenError(f"cannot write in {folder} ({exc.strerror}): choose another output path",
+                                   param="path") from exc
 
     def __exit__(self, kind, exc, traceback) -> None:
         if self._token is not None:
@@ -313,7 +313,7 @@ class Transaction:
                 elif entry.kind == "folder":
                     os.chmod(entry.temp, 0o777 & ~mask)
                     if entry.target.exists():
-                        trash.append(self._mkdtemp(entry.target))
+                        trash.append(_trash_beside(entry.target))
                         os.replace(entry.target, trash[-1] / entry.target.name)
                     os.replace(entry.temp, entry.target)
                 placed.append(entry)
@@ -340,6 +340,19 @@ class Transaction:
             full = disk_full_error(mine[0].target, exc, written)
             if full is not None:
                 raise full from exc
+
+
+def _trash_beside(target: Path) -> Path:
+    """A new folder beside `target` that an outdated folder is moved into before it is removed."""
+    try:
+        return Path(tempfile.mkdtemp(prefix=temp_prefix(target), dir=_folder(target)))
+    except OSError as exc:
+        raise FacegenError(f"cannot write in {_folder(target)} ({exc.strerror}): choose another output path",
+                           param="path") from exc
+
+
+def _create_file(path: Path) -> None:
+    os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
 
 
 def _folder(target: Path) -> Path:

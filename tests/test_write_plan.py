@@ -39,6 +39,26 @@ def test_a_caught_failure_inside_a_transaction_removes_only_its_own_files(tmp_pa
     assert [p.name for p in tmp_path.iterdir()] == ["kept.npy"]
 
 
+def test_ctrl_c_the_moment_a_temporary_appears_leaves_nothing(tmp_path, monkeypatch):
+    """A temporary is staged before it is made: an interrupt right after the file or folder appears (as
+    Ctrl-C on a loaded machine did, between making a temporary and recording it) still removes it."""
+    def made_then_interrupted(make):
+        def wrapped(path):
+            make(path)
+            raise KeyboardInterrupt
+
+        return wrapped
+
+    monkeypatch.setattr(atomic, "_create_file", made_then_interrupted(atomic._create_file))
+    with pytest.raises(KeyboardInterrupt), atomic_path(tmp_path / "out.usda"):
+        pass
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(atomic.os, "mkdir", made_then_interrupted(os.mkdir))
+    with pytest.raises(KeyboardInterrupt), Transaction() as transaction:
+        transaction.folder(tmp_path / "out.clips")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_scratch_folders_carry_the_mark_and_outdated_paths_go_at_the_commit(tmp_path):
     old = tmp_path / "old.clips"
     old.mkdir()
