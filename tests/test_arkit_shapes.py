@@ -13,7 +13,7 @@ from facegen.errors import FacegenError
 from facegen.face.mesh import Mesh
 from facegen.face.procedural import make_face, speaker_face
 from facegen.face.regions import ARKIT_REGIONS, RIG_REGIONS
-from facegen.face.rig import CHANNELS, Rig
+from facegen.face.rig import CHANNELS, LIP_DROP_CM, Rig
 
 
 @pytest.fixture(scope="module")
@@ -166,9 +166,17 @@ def test_left_plus_right_is_the_rig_motion(shapes, face, rig):
         assert np.abs(both - (_pose(rig, **channels) - v)).max() < 1e-6, name
     brows = sum(shapes.offset(name) for name in ("browInnerUp", "browOuterUpLeft", "browOuterUpRight"))
     assert np.abs(brows - (_pose(rig, brow_raise=1.0) - v)).max() < 1e-6
-    close = _pose(rig, jaw_open=1.0, lip_close=1.0) - _pose(rig, jaw_open=1.0)  # on jawOpen's scale:
+    # jawOpen is the jaw's turn alone, on its scale (the rig's jaw_open also drops the lower lip on its own:
+    # that is mouthLowerDown's); mouthClose shuts the lips against that jaw
+    turn = rig.jaw_turn(1.0)
+    close = _pose(rig, jaw_open=1.0, lip_close=1.0) - turn
     assert np.abs(shapes.offset("mouthClose") - JAW_OPEN_SCALE * close).max() < 1e-6
-    assert np.abs(shapes.offset("jawOpen") - JAW_OPEN_SCALE * (_pose(rig, jaw_open=1.0) - v)).max() < 1e-6
+    assert np.abs(shapes.offset("jawOpen") - JAW_OPEN_SCALE * (turn - v)).max() < 1e-6
+    # the rest is the lower lip's own drop, LIP_DROP_CM straight down: mouthLowerDown's deformation (0.55 cm)
+    lip = _pose(rig, jaw_open=1.0) - turn
+    lower_down = shapes.offset("mouthLowerDownLeft") + shapes.offset("mouthLowerDownRight")
+    assert np.abs(lip - LIP_DROP_CM / 0.55 * lower_down).max() < 0.01 * shapes.mm
+    assert np.all(lip[face.regions["mouth_lower_margin"], 1] < 0)
 
 
 def test_eye_look_turns_the_eyeballs(shapes, face, rig):

@@ -194,3 +194,39 @@ def test_calibrate_rig_follows_the_jaw_of_a_real_take(tmp_path):
     found = [capture.r(truth, half) for half in (0, 1)]
     assert min(found) > 0.98, found
     assert capture.r(shipped, 0) + capture.r(shipped, 1) < sum(found) - 0.01
+
+
+def test_the_lower_lip_drops_with_the_jaw_as_a_real_capture_reads_it():
+    """The rig's jaw_open turns the jaw and draws the lower lip further down on its own (LIP_DROP_CM), as a
+    real iPhone take's lower lip drops with its jaw (mouthLowerDown's 95th percentile 0.36 there;
+    docs/arkit_capture.md, benchmarks/calibrate_lip_drop.py): the lip's own part is 5-20 % of the opening at
+    jaw_open 1, which stays ~2 cm. facegen's ARKit fit of that pose: jawOpen 1 / JAW_OPEN_SCALE (the jaw
+    alone: ARKit's widest mouth is the jaw turned JAW_OPEN_ANGLE), mouthLowerDown LIP_DROP_CM / 0.55 cm, the
+    rest of the mouth about still."""
+    from facegen.animation import Animation
+    from facegen.arkit.deformers import JAW_OPEN_ANGLE, JAW_OPEN_SCALE
+    from facegen.arkit.solve import fit_arkit
+    from facegen.face.rig import JAW_MAX_ANGLE, LIP_DROP_CM, Rig
+    from facegen.face.template import load_template
+    from facegen.lipsync import FaceGeometry, aperture
+
+    mesh = load_template()
+    rig = Rig(mesh)
+    weights = np.zeros((2, len(CHANNELS)), np.float32)
+    weights[1, CHANNELS.index("jaw_open")] = 1.0
+    poses = rig.pose(weights)
+    geo = FaceGeometry.of(mesh)
+    opening = aperture(poses, geo)
+    turned = aperture(rig.jaw_turn(1.0)[None], geo)[0]
+    share = (opening[1] - turned) / (opening[1] - opening[0])
+    assert 1.9 <= opening[1] <= 2.1 and 0.05 <= share <= 0.2, (opening, share)
+    assert 0.1 <= LIP_DROP_CM <= 0.4 and JAW_OPEN_SCALE * JAW_MAX_ANGLE == pytest.approx(JAW_OPEN_ANGLE)
+    anim = Animation(vertices=poses, faces=mesh.faces, fps=25.0,
+                     template=np.asarray(mesh.vertices, np.float32), regions=mesh.regions)
+    fit = fit_arkit(anim, 0.0)
+    w = dict(zip(fit.names, fit.weights[1]))
+    assert w["jawOpen"] == pytest.approx(1 / JAW_OPEN_SCALE, abs=0.01)
+    assert w["mouthLowerDownLeft"] == pytest.approx(LIP_DROP_CM / 0.55, abs=0.02)
+    assert w["mouthLowerDownLeft"] == pytest.approx(w["mouthLowerDownRight"], abs=1e-3)
+    others = [n for n in fit.names if n.startswith("mouth") and not n.startswith("mouthLowerDown")]
+    assert max(abs(w[n]) for n in others) < 0.05, {n: w[n] for n in others if abs(w[n]) >= 0.05}

@@ -12,19 +12,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from facegen.face.rig import CHANNELS, Rig, falloff, rotate_x
+from facegen.face.rig import CHANNELS, JAW_MAX_ANGLE, LOWER_LIP_FORWARD, Rig, falloff, rotate_x
 
 SIDE_BLEND_CM = 1.0  # the Left/Right weights cross over between -1 cm and +1 cm of the midline
 LOOK_SIDE, LOOK_UP, LOOK_DOWN = 0.52, 0.42, 0.45  # eye rotation (rad) at eyeLookIn/Out, Up, Down = 1
 EYE_ROTATED_DEG, EYE_FIXED_DEG = 45.0, 85.0  # the eyeball cap turns fully inside, not at all at its rim
 SMILE_GAIN = 1.35  # mouthSmile = the rig's smile (the mouth-corner part of cheek_raise) times this
 PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind the eyeball centres
-# ARKit's jawOpen 1 is the mouth opened as wide as it goes (Apple's reference pose); the rig's jaw_open 1
-# parts the lips by 2.0 cm, about half of an adult's opening (maximal opening between the incisors
-# 40-60 mm). So jawOpen (and mouthClose, the lips shut against that jaw) is the rig's offset at jaw_open 1
-# times this: a weight means what an iPhone's does (against a real capture facegen's jawOpen range was
-# 1.86x the iPhone's; docs/arkit_capture.md). Linear, as every blend shape is: jawOpen 0.5 is jaw_open 1.
-JAW_OPEN_SCALE = 2.0
+# ARKit's jawOpen 1 is the mouth opened as wide as it goes (Apple's reference pose): the jaw turned by
+# JAW_OPEN_ANGLE, twice the rig's jaw_open 1 before the lower lip's own drop (adults open 40-60 mm between the
+# incisors; against a real capture facegen's jawOpen range was 1.86x the iPhone's; docs/arkit_capture.md).
+# jawOpen is the jaw's turn alone (the lower lip's own drop, LIP_DROP_CM, is mouthLowerDown, as on an
+# iPhone), linear as every blend shape is; mouthClose is the lips shut against that jaw.
+JAW_OPEN_ANGLE = 0.66  # rad
+JAW_OPEN_SCALE = JAW_OPEN_ANGLE / JAW_MAX_ANGLE  # jawOpen 1 is this many of the rig's jaw turns (2.27)
 
 
 def _smoothstep(t: np.ndarray) -> np.ndarray:
@@ -135,12 +136,12 @@ def _eyes(d: _Deformers, out: dict[str, np.ndarray]) -> None:
 
 def _jaw(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     jaw = d.f["jaw"]
-    out["jawOpen"] = JAW_OPEN_SCALE * d.delta(jaw_open=1.0)
+    out["jawOpen"] = JAW_OPEN_SCALE * (d.rig.jaw_turn(1.0) - d.rest)
     out["jawForward"] = d.vec(dy=-0.08 * jaw, dz=0.6 * jaw)
     out["jawLeft"] = d.vec(dx=0.65 * jaw)
     out["jawRight"] = d.vec(dx=-0.65 * jaw)
     # ARKit's mouthClose: the lips closed against an open jaw
-    out["mouthClose"] = JAW_OPEN_SCALE * (d.pose(jaw_open=1.0, lip_close=1.0) - d.pose(jaw_open=1.0))
+    out["mouthClose"] = JAW_OPEN_SCALE * (d.pose(jaw_open=1.0, lip_close=1.0) - d.rig.jaw_turn(1.0))
     # no tongue on this face: the small jaw drop and the lips parting a tongue pushed out would cause
     w_lo = d.field(d.f["d_lo"], 2.0, ~d.f["upper_side"])
     # no tongue on this face: the lower lip pushed out and down as a tongue over it would (no jaw: that is
@@ -171,7 +172,7 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     d.sided(out, "mouthFrown", d.vec(dx=0.1 * np.tanh(X) * corner, dy=-0.45 * corner, dz=-0.05 * corner))
     d.sided(out, "mouthDimple", d.vec(dx=0.15 * np.tanh(X) * corner, dy=0.05 * corner, dz=-0.35 * corner))
     d.sided(out, "mouthStretch", d.delta(lip_wide=1.0))
-    lat_wide = np.sqrt(np.clip(1 - (X / (d.rig.mouth_half + 1.0)) ** 2, 0, 1))
+    lat_wide = f["lat_wide"]
     shrug = d.field(f["d_lo"], 2.6, ~upper) * lat_wide
     out["mouthShrugLower"] = d.vec(dy=0.28 * shrug, dz=0.2 * shrug)
     # the whole upper lip pushed out and up (not the reverse of mouthRollUpper: that one is the margin alone)
@@ -179,8 +180,8 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthShrugUpper"] = d.vec(dy=0.1 * shrug_up, dz=0.28 * shrug_up)
     press = d.delta(lip_close=1.0) + d.vec(dy=-0.08 * sgn * near * lat, dz=-0.1 * near)
     d.sided(out, "mouthPress", press)
-    lower = d.field(f["d_lo"], 2.0, ~upper)
-    d.sided(out, "mouthLowerDown", d.vec(dy=-0.55 * lower * lat_wide, dz=0.08 * lower))
+    lower = f["lower_lip"]  # the rig's own: jaw_open draws the lower lip down the same way
+    d.sided(out, "mouthLowerDown", d.vec(dy=-0.55 * lower, dz=0.55 * LOWER_LIP_FORWARD * lower))
     d.sided(out, "mouthUpperUp", d.delta(upper_lip_raise=1.0))
 
 

@@ -37,7 +37,15 @@ EXPRESSIONS: dict[str, dict[str, float]] = {
 }
 
 EYE_SPACING_CM = 6.3  # distance between the eyeball centres of the canonical face
-JAW_MAX_ANGLE = 0.33  # rad at jaw_open = 1 (about 2 cm between the lips)
+# jaw_open = 1 parts the lips by about 2 cm: the jaw turns JAW_MAX_ANGLE and the lower lip is drawn down
+# LIP_DROP_CM further on its own (depressor labii inferioris), as a real capture's lower lip is
+# (mouthLowerDown follows jawOpen at r 0.68 there). The split is set on that capture
+# (benchmarks/calibrate_lip_drop.py, docs/arkit_capture.md): with a tenth of the opening the lower lip's own,
+# facegen's fit of the rig's motion reaches the capture's mouthLowerDown (95th percentile 0.36); the jaw alone
+# turned 0.33 rad before.
+JAW_MAX_ANGLE = 0.291  # rad
+LIP_DROP_CM = 0.21
+LOWER_LIP_FORWARD = 0.15  # cm the lower lip comes forward per cm it is drawn down (it everts)
 
 
 def falloff(d: np.ndarray, radius: float) -> np.ndarray:
@@ -98,7 +106,8 @@ class Rig:
     Besides posing, it keeps what other deformers of the face build on (facegen.arkit.shapes): `cm` (mesh
     units per cm), `distance` (graph distance in cm) and `smooth`, the per-vertex weight fields in `fields`
     (mouth: `mouth_x` cm across the mouth from its centre, `upper_side`, `d_up`/`d_lo`/`d_m` cm from the
-    upper / lower / either lip margin, `lat`, `near`, `peri`, `w_up`, `w_lo`; `brow`, `corner` and `cheek`
+    upper / lower / either lip margin, `lat`, `lat_wide`, `near`, `peri`, `w_up`, `w_lo`, `lower_lip` (the
+    lower lip as jaw_open and mouthLowerDown draw it down); `brow`, `corner` and `cheek`
     with their distances `d_corner` and `d_cheek`, `squint` (below the lower lids), `jaw` (the jaw's
     rotation weight)), `mouth_centre` (mesh units), `mouth_half` (cm), the eyeballs' `eye_centres` /
     `eye_axes` and the lid rotation arrays (`lid_idx`, `lid_upper`, `lid_w`, `lid_alpha`: the angle that
@@ -159,6 +168,11 @@ class Rig:
                                   dz=0.5 * peri**2 + 0.15 * near)
         off["lower_lip_tuck"] = field(dy=0.38 * w_lo * lat + 0.06 * w_up * lat, dz=-0.5 * w_lo * lat)
         off["upper_lip_raise"] = field(dy=0.32 * w_up * lat, dz=0.12 * w_up * lat)
+        # the lower lip drawn down (ARKit's mouthLowerDown): the jaw's own drop of it
+        lat_wide = np.sqrt(np.clip(1 - (X / (half + 1.0)) ** 2, 0, 1))
+        lower_lip = sm(falloff(d_lo, 2.0) * ~upper_side) * lat_wide
+        self._lip_drop = field(dy=-LIP_DROP_CM * lower_lip,
+                               dz=LOWER_LIP_FORWARD * LIP_DROP_CM * lower_lip).astype(np.float32)
 
         # upper face
         d_brow = dist(reg["brows"])
@@ -191,7 +205,7 @@ class Rig:
         self.mouth_centre, self.mouth_half = mouth_centre, half
         self.fields = {"mouth_x": X, "upper_side": upper_side, "d_up": d_up, "d_lo": d_lo, "d_m": d_m,
                        "lat": lat, "near": near, "peri": peri, "w_up": w_up, "w_lo": w_lo, "brow": w_brow,
-                       "corner": w_corner, "d_corner": d_corner,
+                       "corner": w_corner, "d_corner": d_corner, "lat_wide": lat_wide, "lower_lip": lower_lip,
                        "cheek": w_cheek, "d_cheek": d_cheek, "squint": w_squint}
         self._linear = [c for c in CHANNELS if c in off]
         self._offsets = (np.stack([off[c] for c in self._linear]).reshape(len(self._linear), -1)
@@ -292,6 +306,14 @@ class Rig:
                 out[pin] = fixed
         return out
 
+    def jaw_turn(self, jaw_open: float = 1.0) -> np.ndarray:
+        """The template [V, 3] with the jaw turned as `jaw_open` turns it, the lower lip's own drop left out
+        (ARKit's jawOpen is the jaw alone; the lip's part is mouthLowerDown)."""
+        pos = self.template.astype(np.float32)[None].copy()
+        ang = np.float32(jaw_open * JAW_MAX_ANGLE) * self._jaw_w[None, :].astype(np.float32)
+        rotate_x(pos, self._jaw_idx, self.hinge.astype(np.float32), ang)
+        return pos[0].astype(np.float64)
+
     def pose(self, weights: np.ndarray) -> np.ndarray:
         """Vertex positions [T, V, 3] (float32) for channel weights [T, C] in `channels` order."""
         w = np.asarray(weights, np.float32)
@@ -305,6 +327,8 @@ class Rig:
         # jaw
         ang = ch["jaw_open"][:, None] * np.float32(JAW_MAX_ANGLE) * self._jaw_w[None, :].astype(np.float32)
         rotate_x(pos, self._jaw_idx, self.hinge.astype(np.float32), ang)
+        pos += ch["jaw_open"][:, None, None] * self._lip_drop[None]  # after the turn: straight down, as
+        # mouthLowerDown draws it (inside the turn it would tip back, and ARKit's fit read a lip rolled in)
         # lids: blink closes, widen opens (less while blinking), frown narrows a little
         blink = ch["blink"][:, None]
         widen = ch["lid_widen"][:, None] * (1 - blink)
