@@ -93,15 +93,15 @@ def teacher_on_take(take: calibrate_rig.Capture, mesh) -> dict[str, np.ndarray]:
     from facegen.animation import Animation
     from facegen.arkit.shapes import build_shapes
     from facegen.arkit.solve import fit_arkit
-    from facegen.face.rig import CHANNELS, LOWER_CHANNELS, Rig
+    from facegen.face.rig import Rig
     from facegen.synth.corpus import TRAIN_SPEAKERS, speaker_index
-    from facegen.synth.curves import SpeakerStyle, viseme_curves
+    from facegen.synth.curves import SpeakerStyle
+    from facegen.synth.reference import rig_reference
 
     style = SpeakerStyle.for_speaker(speaker_index(TRAIN_SPEAKERS[0]))  # a model's first speaker: its default
-    lower = viseme_curves(take.phones, take.n, 25.0, style, alphabet="cmu", loudness=take.loudness)
-    weights = np.zeros((take.n, len(CHANNELS)), np.float32)
-    weights[:, :len(LOWER_CHANNELS)] = lower
-    anim = Animation(vertices=Rig(mesh).pose(weights), faces=mesh.faces, fps=25.0,
+    vertices = rig_reference(take.phones, [], take.n, 25.0, Rig(mesh), alphabet="cmu", loudness=take.loudness,
+                             style=style)
+    anim = Animation(vertices=vertices, faces=mesh.faces, fps=25.0,
                      template=np.asarray(mesh.vertices, np.float32), regions=mesh.regions)
     fit = fit_arkit(anim, shapes=build_shapes(mesh))
     return {name: fit.weights[:, i] for i, name in enumerate(fit.names)}

@@ -232,7 +232,7 @@ class Transaction:
         check_writable(target)
         folder = _folder(target)
         remove_stale_temporaries(folder)
-        temp = self._new_temp("file", target, target, _create_file)
+        temp = self._new_temp("file", target, _create_file)
         temp.unlink()  # writers (pxr, soundfile, ...) create the file themselves
         return temp
 
@@ -244,23 +244,23 @@ class Transaction:
             raise FacegenError(f"{target} is a file, so facegen cannot write the folder there: rename or "
                                "remove it, or choose another output name", param="path")
         check_writable(_folder(target) / f"{target.name}.new")  # a writable parent, a name not too long
-        return self._new_temp("folder", target, target, os.mkdir)
+        return self._new_temp("folder", target, os.mkdir)
 
     def scratch(self, near: str | os.PathLike) -> Path:
         """A new temporary folder beside `near` for intermediate files, removed when this transaction ends."""
-        return self._new_temp("scratch", Path(near), Path(near), os.mkdir)
+        return self._new_temp("scratch", Path(near), os.mkdir)
 
     def remove(self, path: str | os.PathLike) -> None:
         """Remove `path` (an outdated file or folder of the asset) at the commit, not before."""
         self._root._staged.append(_Staged("remove", Path(path)))
 
-    def _new_temp(self, kind: str, target: Path, near: Path, make) -> Path:
-        """A new temporary path beside `near` (`make(path)` creates it: a file keeps `near`'s suffix), staged
-        before it exists: an interrupt (Ctrl-C) at any moment leaves nothing behind."""
-        folder = _folder(near)
-        suffix = near.suffix if kind == "file" else ""
+    def _new_temp(self, kind: str, target: Path, make) -> Path:
+        """A new temporary path beside `target` (`make(path)` creates it: a file keeps `target`'s suffix),
+        staged before it exists: an interrupt (Ctrl-C) at any moment leaves nothing behind."""
+        folder = _folder(target)
+        suffix = target.suffix if kind == "file" else ""
         while True:
-            staged = _Staged(kind, target, folder / f"{temp_prefix(near)}{secrets.token_hex(4)}{suffix}")
+            staged = _Staged(kind, target, folder / f"{temp_prefix(target)}{secrets.token_hex(4)}{suffix}")
             self._root._staged.append(staged)
             try:
                 make(staged.temp)

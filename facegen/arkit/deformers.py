@@ -20,8 +20,8 @@ EYE_ROTATED_DEG, EYE_FIXED_DEG = 45.0, 85.0  # the eyeball cap turns fully insid
 SMILE_GAIN = 1.35  # mouthSmile = the rig's smile (the mouth-corner part of cheek_raise) times this
 PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind the eyeball centres
 # ARKit's jawOpen 1 is the mouth opened as wide as it goes (Apple's reference pose): the jaw turned by
-# JAW_OPEN_ANGLE, twice the rig's jaw_open 1 before the lower lip's own drop (adults open 40-60 mm between the
-# incisors; against a real capture facegen's jawOpen range was 1.86x the iPhone's; docs/arkit_capture.md).
+# JAW_OPEN_ANGLE, about 4 cm between the lips (adults open 40-60 mm between the incisors; against a real
+# capture facegen's jawOpen range was 1.86x the iPhone's; docs/arkit_capture.md).
 # jawOpen is the jaw's turn alone (the lower lip's own drop, LIP_DROP_CM, is mouthLowerDown, as on an
 # iPhone), linear as every blend shape is; mouthClose is the lips shut against that jaw.
 JAW_OPEN_ANGLE = 0.66  # rad
