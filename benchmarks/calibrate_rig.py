@@ -11,9 +11,9 @@ so the held-out half says whether it generalises.
 
 The parameters (facegen.synth.curves): a gain on every vowel's jaw opening and one per vowel class (open,
 mid, spread, rounded), the consonants' jaw dominance (how much a consonant between two vowels closes the jaw),
-the anticipation and carry-over time constants of coarticulation, the jaw opening of the in-breath before
-speech after a pause and the lips' ramp into and out of a p/b/m. Bounds keep them physical (see
-docs/real_faces.md for the published figures they are held against).
+the anticipation and carry-over time constants of coarticulation (the jaw's anticipation apart), the jaw
+opening of the in-breath before speech after a pause and the lips' ramp into and out of a p/b/m. Bounds keep
+them physical (see docs/real_faces.md for the published figures they are held against).
 
     python benchmarks/calibrate_rig.py [benchmarks/results/real_faces_default.json] [--evals 300]
 """
@@ -43,6 +43,7 @@ PARAMS = {
     "rounded": (1.0, 0.6, 2.0),
     "consonant_jaw_dominance": (1.0, 0.2, 1.5),
     "anticipation_s": (None, 0.03, 0.15),  # None: the shipped value (facegen.synth.curves)
+    "jaw_anticipation_s": (None, 0.02, 0.15),  # the jaw's own (JAW_ANTICIPATION_S)
     "carryover_s": (None, 0.015, 0.12),
     "pre_speech_jaw": (None, 0.0, 0.3),
     "close_ramp_s": (None, 0.01, 0.06),
@@ -72,6 +73,7 @@ def apply(params: dict) -> dict:
     from facegen.synth import curves
 
     old = {"VISEMES": dict(curves.VISEMES), "ANTICIPATION_S": curves.ANTICIPATION_S,
+           "JAW_ANTICIPATION_S": curves.JAW_ANTICIPATION_S,
            "CARRYOVER_S": curves.CARRYOVER_S, "PRE_SPEECH_JAW": curves.PRE_SPEECH_JAW,
            "CLOSE_RAMP_S": curves.CLOSE_RAMP_S, "ROUND_CLOSE": curves.ROUND_CLOSE}
     visemes = dict(old["VISEMES"])
@@ -88,6 +90,7 @@ def apply(params: dict) -> dict:
         visemes[vis] = (target, dom_jaw, dom_lips)
     curves.VISEMES = visemes
     curves.ANTICIPATION_S = params["anticipation_s"]
+    curves.JAW_ANTICIPATION_S = params["jaw_anticipation_s"]
     curves.CARRYOVER_S = params["carryover_s"]
     curves.PRE_SPEECH_JAW = params["pre_speech_jaw"]
     curves.CLOSE_RAMP_S = params["close_ramp_s"]

@@ -95,6 +95,25 @@ def test_coarticulation_leads_and_closures_last_as_measured():
     assert 0.06 <= shut[-1] - shut[0] + 1 / fps <= 0.12 and shut[0] <= 0.7, (shut[0], shut[-1])
 
 
+def test_the_jaw_anticipates_less_than_the_lips():
+    """Lip rounding is coarticulation's long-range gesture; the jaw moves ahead of its vowel less (fitted on a
+    real iPhone take: 0.05 s against the lips' 0.1 s). After a 300 ms /s/, the lips are half-way to a UW's
+    rounding at least 20 ms before the jaw is half-way to an AA's opening, and both rise before the vowel."""
+    assert 0.03 <= curves.JAW_ANTICIPATION_S < curves.ANTICIPATION_S
+    fps = 1000.0
+    n = int(1.2 * fps)
+    jaw = viseme_curves([("S", 0.5, 0.8), ("AA1", 0.8, 1.0)], n, fps, alphabet="cmu")[:, JAW]
+    rounding = viseme_curves([("S", 0.5, 0.8), ("UW1", 0.8, 1.0)], n, fps,
+                             alphabet="cmu")[:, LOWER_CHANNELS.index("lip_round")]
+
+    def half_way(x: np.ndarray) -> float:
+        a, b = int(0.6 * fps), int(0.9 * fps)
+        level = (x[a] + x[b]) / 2
+        return (a + int(np.argmax(x[a:b] >= level))) / fps
+
+    assert half_way(rounding) + 0.02 <= half_way(jaw) < 0.8, (half_way(rounding), half_way(jaw))
+
+
 def test_the_lips_part_before_speech_after_a_pause(rig):
     """After a pause the jaw opens in the last PRE_SPEECH_S before the first sound (an in-breath), not
     earlier."""

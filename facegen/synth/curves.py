@@ -100,6 +100,11 @@ def held_target(vis: str) -> np.ndarray:
 
 VOWEL_APERTURE_DOMINANCE = 2.5  # vowels need the lips apart: they dominate lip_close strongly
 ANTICIPATION_S = 0.1  # s, time constant of a segment's dominance before it (coarticulation ahead)
+# The jaw anticipates less than the lips (lip rounding is the long-range gesture of coarticulation): on a
+# real iPhone take of running speech a jaw that moves ahead by ANTICIPATION_S follows the capture's jawOpen
+# at r 0.44, one that moves ahead by 0.05 s at 0.49, while GRID's lip aperture hardly tells them apart
+# (r 0.741 / 0.739; benchmarks/calibrate_rig.py, docs/real_faces.md, sixth pass).
+JAW_ANTICIPATION_S = 0.05  # s, the jaw channel's time constant ahead
 CARRYOVER_S = 0.019  # s, after it
 CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.034, 0.06  # s, the lips' and the jaw's ramps into and out of a p/b/m
 # People part their lips before they speak after a pause (an in-breath: real speakers 0.02-0.43 s before the
@@ -212,7 +217,8 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     is_close = np.array([c == "lip_close" for c in LOWER_CHANNELS])
     num = np.zeros((n, C))
     den = np.full((n, C), 1e-9)
-    ahead, behind = ANTICIPATION_S * style.coarticulation, CARRYOVER_S * style.coarticulation
+    ahead = np.where(lips, ANTICIPATION_S, JAW_ANTICIPATION_S) * style.coarticulation  # [C]
+    behind = CARRYOVER_S * style.coarticulation
     for start, end, vis, gain in segments:
         _, dom_jaw, dom_lips = VISEMES[vis]
         target = _v(jaw_open=PRE_SPEECH_JAW) if vis == "inhale" else held_target(vis)
@@ -221,11 +227,11 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
         centre, half = (start + end) / 2, (end - start) / 2
         dt = t - centre
         away = np.maximum(np.abs(dt) - half * (1.0 if vis == "rest" else 0.8), 0.0)
-        rate = np.where(dt < 0, 1 / ahead, 1 / behind)  # before the segment: anticipation
+        rate = np.where((dt < 0)[:, None], 1 / ahead[None, :], 1 / behind)  # before the segment: anticipation
         dom = np.where(lips, dom_lips, dom_jaw)
         if vis in VOWEL_VISEMES:
             dom = np.where(is_close, VOWEL_APERTURE_DOMINANCE, dom)
-        d = np.exp(-away * rate)[:, None] * dom[None, :]
+        d = np.exp(-away[:, None] * rate) * dom[None, :]
         num += d * target[None, :]
         den += d
     curves = num / den
