@@ -25,7 +25,7 @@ PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind
 # jawOpen is the jaw's turn alone (the lower lip's own drop, LIP_DROP_CM, is mouthLowerDown, as on an
 # iPhone), linear as every blend shape is; mouthClose is the lips shut against that jaw.
 JAW_OPEN_ANGLE = 0.66  # rad
-JAW_OPEN_SCALE = JAW_OPEN_ANGLE / JAW_MAX_ANGLE  # jawOpen 1 is this many of the rig's jaw turns (2.27)
+JAW_OPEN_SCALE = JAW_OPEN_ANGLE / JAW_MAX_ANGLE  # jawOpen 1 is this many of the rig's jaw turns (2.42)
 
 
 def _smoothstep(t: np.ndarray) -> np.ndarray:

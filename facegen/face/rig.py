@@ -40,12 +40,15 @@ EYE_SPACING_CM = 6.3  # distance between the eyeball centres of the canonical fa
 # jaw_open = 1 parts the lips by about 2 cm: the jaw turns JAW_MAX_ANGLE and the lower lip is drawn down
 # LIP_DROP_CM further on its own (depressor labii inferioris), as a real capture's lower lip is
 # (mouthLowerDown follows jawOpen at r 0.68 there). The split is set on that capture
-# (benchmarks/calibrate_lip_drop.py, docs/arkit_capture.md): with a tenth of the opening the lower lip's own,
-# facegen's fit of the rig's motion reaches the capture's mouthLowerDown (95th percentile 0.36); the jaw alone
-# turned 0.33 rad before.
-JAW_MAX_ANGLE = 0.291  # rad
-LIP_DROP_CM = 0.21
+# (benchmarks/calibrate_lip_drop.py, docs/arkit_capture.md): with 15 % of the opening the lower lip's own,
+# the model trained on the rig draws the lower lip down nearly as far as the capture (mouthLowerDown's range
+# 0.84x) and its jawOpen ranges 1.25x the capture's; the rig alone draws it 1.2x as far (95th percentile
+# 0.44 against 0.36). A tenth (0.291 rad, 0.21 cm) matched the rig alone, and the network drew the lip half
+# as far; the jaw alone turned 0.33 rad before that.
+JAW_MAX_ANGLE = 0.273  # rad
+LIP_DROP_CM = 0.31
 LOWER_LIP_FORWARD = 0.15  # cm the lower lip comes forward per cm it is drawn down (it everts)
+ROUND_FORWARD = 0.4  # cm the skin beside the mouth's corners comes forward at full rounding (lip_round)
 
 
 def falloff(d: np.ndarray, radius: float) -> np.ndarray:
@@ -160,8 +163,12 @@ class Rig:
         Xc = np.clip(X, -half, half)
         peri_round = sm(falloff(d_m, 1.9))
         wide_round = sm(falloff(d_m, 3.0))
+        # rounding narrows the mouth and brings it forward: the skin beside the corners comes forward as it
+        # is drawn in (ROUND_FORWARD), else it would pass into the dental arch (a held OW: 1.7 mm into the
+        # canines)
+        forward = ROUND_FORWARD * np.abs(Xc) / half * wide_round
         off["lip_round"] = field(dx=-0.36 * Xc * wide_round, dy=sgn * 0.22 * near * opening**0.7,
-                                 dz=0.5 * peri_round**2 + 0.25 * near)
+                                 dz=0.5 * peri_round**2 + 0.25 * near + forward)
         off["lip_wide"] = field(dx=0.24 * Xc * peri, dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near,
                                 dz=-0.18 * peri)
         off["lip_funnel"] = field(dx=-0.18 * Xc * peri, dy=sgn * 0.3 * near * opening**0.3,
