@@ -35,10 +35,12 @@ class TrainConfig:
     `output` "full" is the paper's FC 3V; "pca" trains it in a `basis`-dimensional PCA basis of the
     training motion (facegen.train_pca; the bundle stores the folded FC 3V), where `lip_weight`,
     `upper_weight` and `velocity_weight` add lip-vertex, upper-face and frame-to-frame terms to the loss
-    (0: the paper's MSE). `patience` stops after that many epochs without a better validation loss (None:
-    every epoch runs). `phones` adds the phone stream (per-frame phones from the dataset's alignment JSON)
-    to the audio encoder. `init` is a bundle whose weights the run starts from (fine-tuning:
-    facegen.train_init), None: a random initialisation.
+    (0: the paper's MSE). `text_free_lips` (pca, audio and text) adds a second pass with zero text features
+    whose lips fit the target and which the full pass's lips follow, weighted so: the words then move the
+    upper face but not the lips (the synthetic teacher's lips never depend on them). `patience` stops after
+    that many epochs without a better validation loss (None: every epoch runs). `phones` adds the phone
+    stream (per-frame phones from the dataset's alignment JSON) to the audio encoder. `init` is a bundle
+    whose weights the run starts from (fine-tuning: facegen.train_init), None: a random initialisation.
     """
 
     text_backend: str = "minilm"
@@ -57,6 +59,7 @@ class TrainConfig:
     lip_weight: float = 0.0
     velocity_weight: float = 0.0
     upper_weight: float = 0.0
+    text_free_lips: float = 0.0
     patience: int | None = None
     phones: bool = False
     init: str | None = None
@@ -79,13 +82,17 @@ class TrainConfig:
                                "pca", param="output")
         if self.output == "pca" and self.basis < 1:
             raise FacegenError(f"the basis must have at least 1 dimension, got {self.basis}", param="basis")
-        weights = (self.lip_weight, self.upper_weight, self.velocity_weight)
+        weights = (self.lip_weight, self.upper_weight, self.velocity_weight, self.text_free_lips)
+        names = ("lip_weight", "upper_weight", "velocity_weight", "text_free_lips")
         if not (min(weights) >= 0 and math.isfinite(sum(weights))):
-            raise FacegenError("the lip, upper-face and velocity weights must be finite and at least 0",
-                               param=("lip_weight", "upper_weight", "velocity_weight"))
+            raise FacegenError("the lip, upper-face, velocity and text-free lips weights must be finite and "
+                               "at least 0", param=names)
         if any(weights) and self.output != "pca":
-            raise FacegenError("the lip, upper-face and velocity weights need the pca output layer",
-                               param=("lip_weight", "upper_weight", "velocity_weight", "output"))
+            raise FacegenError("the lip, upper-face, velocity and text-free lips weights need the pca output "
+                               "layer", param=(*names, "output"))
+        if self.text_free_lips and self.modalities != "both":
+            raise FacegenError("text-free lips need a model of audio and text (modalities both)",
+                               param=("text_free_lips", "modalities"))
         if self.patience is not None and self.patience < 1:
             raise FacegenError(f"the patience must be at least 1 epoch, got {self.patience}",
                                param="patience")
@@ -108,6 +115,8 @@ class TrainConfig:
         if self.output == "pca":
             out.update(basis=self.basis, basis_variance=run["basis_variance"], lip_weight=self.lip_weight,
                        velocity_weight=self.velocity_weight, upper_weight=self.upper_weight)
+            if self.text_free_lips:
+                out["text_free_lips"] = self.text_free_lips
         if self.patience:
             out["patience"] = self.patience
         if self.phones:

@@ -61,8 +61,16 @@ class Batch:
 
     def loss(self, model: FaceModel, coefficient_loss=None) -> torch.Tensor:
         if self.coefficients is not None:
-            return coefficient_loss(model.coefficients(self.mel, self.text, self.speaker, self.phones)[0],
-                                    self.coefficients)
+            pred = model.coefficients(self.mel, self.text, self.speaker, self.phones)[0]
+            loss = coefficient_loss(pred, self.coefficients)
+            weight = getattr(coefficient_loss, "text_free_weight", 0.0)
+            if weight and self.text is not None:
+                # the text-free pass: the lips from the sound and the phones alone (zero text features)
+                # fit the target, and the full pass's lips follow them: words move the upper face, not lips
+                free = model.coefficients(self.mel, torch.zeros_like(self.text), self.speaker, self.phones)[0]
+                loss = loss + weight * (coefficient_loss.lips(free, self.coefficients)
+                                        + coefficient_loss.lips(pred, free.detach()))
+            return loss
         out = model(self.mel, self.text, self.speaker, self.phones)
         return torch.nn.functional.mse_loss(out.view(out.shape[1], -1), self.target())
 
@@ -144,7 +152,8 @@ def pca_targets(config: TrainConfig, data: TrainData, dev: torch.device, reporte
                 np.save(tmp, coefficients[it.name])
     regions = data.mesh.regions
     loss = CoefficientLoss(pca, regions.get("lips"), config.lip_weight, config.velocity_weight, dev,
-                           upper=regions.get("upper_face"), upper_weight=config.upper_weight)
+                           upper=regions.get("upper_face"), upper_weight=config.upper_weight,
+                           text_free_weight=config.text_free_lips if config.modalities == "both" else 0.0)
     return PcaTargets(pca, mean, kept, coefficients, loss, CoefficientLoss(pca, None))
 
 

@@ -6,7 +6,8 @@ offsets = B c + m, with B [3V, K] the first K principal directions of the traini
 columns) and m their mean, the layer is exactly the paper's at rank K (facegen.model: `folded`), and since
 ||B (c - c*)||² = ||c - c*||², the vertex MSE is the coefficient MSE (up to the constant error of projecting
 the targets): the loss never needs the 70,110 numbers. Lip- and upper-face-weighted and velocity terms stay
-exact in K dimensions too (`CoefficientLoss`).
+exact in K dimensions too (`CoefficientLoss`), as does the lips' term of the text-free pass
+(`CoefficientLoss.lips`, `--text-free-lips`).
 """
 
 from __future__ import annotations
@@ -79,14 +80,18 @@ class CoefficientLoss:
 
     def __init__(self, basis: np.ndarray, lips: np.ndarray | None, lip_weight: float = 0.0,
                  velocity_weight: float = 0.0, device: torch.device | str = "cpu", *,
-                 upper: np.ndarray | None = None, upper_weight: float = 0.0) -> None:
+                 upper: np.ndarray | None = None, upper_weight: float = 0.0,
+                 text_free_weight: float = 0.0) -> None:
         self.coords = basis.shape[0]
         self.velocity_weight = float(velocity_weight)
+        self.text_free_weight = float(text_free_weight)
         self.regions = []  # (weight, basis rows of the region's coordinates)
+        self.lip_rows = None
+        if lip_weight > 0 or text_free_weight > 0:
+            option = "lip_weight" if lip_weight > 0 else "text_free_lips"
+            self.lip_rows = _rows(basis, lips, option, "lip region (regions/lve.txt)", device)
         if lip_weight > 0:
-            self.regions.append((float(lip_weight), _rows(basis, lips, "lip_weight", "lip region "
-                                                                                     "(regions/lve.txt)",
-                                                          device)))
+            self.regions.append((float(lip_weight), self.lip_rows))
         if upper_weight > 0:
             self.regions.append((float(upper_weight), _rows(basis, upper, "upper_weight",
                                                             "upper-face region (regions/fdd.txt)", device)))
@@ -100,6 +105,10 @@ class CoefficientLoss:
         if self.velocity_weight > 0 and len(err) > 1:
             loss = loss + self.velocity_weight * (err[1:] - err[:-1]).square().sum(-1).mean() / self.coords
         return loss
+
+    def lips(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """The MSE over the lip vertices' coordinates of pred, target [T, K] coefficients."""
+        return ((pred - target) @ self.lip_rows.T).square().mean()
 
 
 def _rows(basis: np.ndarray, vertices: np.ndarray | None, option: str, region: str, device) -> torch.Tensor:

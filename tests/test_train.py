@@ -236,3 +236,56 @@ def test_init_starts_from_a_bundle_and_refuses_another_network(toy, tmp_path):
     with pytest.raises(FacegenError, match="another network than this run's .*lstm_dim"):
         train_toy(toy, tmp_path / "other.safetensors", init=str(first),
                   model_options={**SMALL, "lstm_dim": 4})
+
+
+def test_text_free_lips_keep_the_words_off_the_lips(tmp_path_factory, tmp_path):
+    """--text-free-lips: from a model whose words move its lips, fine-tuning with it brings the lips with the
+    words and with zero text features nearer each other than fine-tuning without it; the option needs a pca
+    model of audio and text."""
+    from helpers import make_tiny_gpt2
+
+    from facegen.bundle import save_bundle
+    from facegen.train_config import TrainConfig
+    from facegen.train_data import load_train_data, make_batches
+
+    folder = make_tiny_gpt2(tmp_path_factory.mktemp("gpt2"), n_positions=64)
+    toy = make_dataset(tmp_path / "d", subjects=("F2", "F3"), sentences=range(1, 6))
+    with pytest.raises(FacegenError, match="text-free lips need a model of audio and text"):
+        train_toy(toy, tmp_path / "a.safetensors", output="pca", basis=6, text_free_lips=1.0)
+    with pytest.raises(FacegenError, match="need the pca output layer"):
+        train_toy(toy, tmp_path / "a.safetensors", modalities="both", text_backend=str(folder),
+                  text_free_lips=1.0)
+    options = {"modalities": "both", "text_backend": str(folder), "output": "pca", "basis": 6,
+               "lip_weight": 1.0}
+    train_toy(toy, tmp_path / "base.safetensors", epochs=2, **options)
+    base = load_bundle(tmp_path / "base.safetensors")
+    with torch.no_grad():  # the words now move the whole face, lips too
+        base.model.text.fc2.weight.mul_(20.0)
+    save_bundle(base, tmp_path / "wordy.safetensors")
+    config = TrainConfig(modalities="both", text_backend=str(folder), splits=TOY_SPLITS)
+    data = load_train_data(toy, config, toy / ".cache", str(folder), "fail", SILENT)
+    batches = make_batches(data, config, None, torch.device("cpu"))[0]
+    lips = torch.from_numpy(np.asarray(base.template.regions["lips"], np.int64))
+
+    def words_on_lips(path) -> float:  # the mean lip displacement the words make, over the lips' own motion
+        model = load_bundle(path).model
+        gap = moved = 0.0
+        with torch.no_grad():
+            for b in batches:
+                shape = (b.mel.shape[1], -1, 3)
+                both = model(b.mel, b.text, b.speaker)[0].reshape(shape)[:, lips]
+                free = model(b.mel, torch.zeros_like(b.text), b.speaker)[0].reshape(shape)[:, lips]
+                gap += float((both - free).norm(dim=-1).mean())
+                moved += float((both - both.mean(0)).norm(dim=-1).mean())
+        return gap / moved
+
+    share = {"wordy": words_on_lips(tmp_path / "wordy.safetensors")}
+    for weight in (0.0, 4.0):
+        out = tmp_path / f"free{weight}.safetensors"
+        train_toy(toy, out, epochs=3, init=str(tmp_path / "wordy.safetensors"), text_free_lips=weight,
+                  **options)
+        share[weight] = words_on_lips(out)
+        if weight:
+            assert read_metadata(out)["provenance"]["text_free_lips"] == weight
+    assert share["wordy"] > 0.05, share  # the perturbation did put the words on the lips
+    assert share[4.0] < 0.5 * share[0.0], share

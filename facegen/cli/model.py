@@ -85,6 +85,10 @@ def info(bundle, as_json):
               help="Loss on frame-to-frame motion (pca only).")
 @click.option("--upper-weight", type=WEIGHT, default=TrainConfig.upper_weight, show_default=True,
               help="Extra loss on the upper-face vertices (pca only).")
+@click.option("--text-free-lips", "text_free_lips", type=WEIGHT, default=TrainConfig.text_free_lips,
+              show_default=True,
+              help="Weight of a second pass without the words whose lips must fit too and which the full "
+                   "pass's lips follow: the words move the upper face, not the lips (pca only).")
 @click.option("--patience", type=click.IntRange(min=1),
               help="Stop after this many epochs without a better validation loss.")
 @click.option("--phones", is_flag=True, help="Add the phone stream (per-frame phones) to the audio encoder.")
@@ -94,8 +98,8 @@ def info(bundle, as_json):
 @click.option("--quiet", "-q", is_flag=True)
 def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr, batch_size, seed, device,
           resume, checkpoint_dir, precision, threads, strict, output_layer, basis, lip_weight,
-          velocity_weight, upper_weight, patience, phones, init, train_subjects, test_subjects,
-          train_sentences, val_sentences, test_sentences, quiet):
+          velocity_weight, upper_weight, text_free_lips, patience, phones, init, train_subjects,
+          test_subjects, train_sentences, val_sentences, test_sentences, quiet):
     """Train a model on a BIWI-layout dataset DATA (the paper's setup by default)."""
     import os
 
@@ -106,7 +110,8 @@ def train(data, output, text_backend, text_model, modalities, fusion, epochs, lr
     config = TrainConfig(text_backend=text_backend, modalities=modalities, fusion=fusion, epochs=epochs,
                          lr=lr, batch_size=batch_size, seed=seed, splits=chosen, precision=precision,
                          output=output_layer, basis=basis, lip_weight=lip_weight,
-                         velocity_weight=velocity_weight, upper_weight=upper_weight, patience=patience,
+                         velocity_weight=velocity_weight, upper_weight=upper_weight,
+                         text_free_lips=text_free_lips, patience=patience,
                          phones=phones, init=init)
     result = run(data, output, config, device=device, threads=threads, resume=resume,
                  checkpoint_dir=checkpoint_dir, text_model_path=text_model,
