@@ -298,6 +298,7 @@ def train(
         "train": [it.name for it in data.train], "val": [it.name for it in data.val], "output": config.output,
         "lip_weight": config.lip_weight, "velocity_weight": config.velocity_weight,
         **({"upper_weight": config.upper_weight} if config.upper_weight else {}),
+        **({"text_free_lips": config.text_free_lips} if config.text_free_lips else {}),
         **({"init": str(config.init)} if config.init else {}),
     }
     with torch_settings(threads):
@@ -390,7 +391,7 @@ class _Run:
         stored = dict(meta.get("signature", {}))
         if "feature_config" in stored:  # written before a feature setting existed: its default
             stored["feature_config"] = FeatureConfig.from_dict(stored["feature_config"]).to_dict()
-        differs = [k for k in signature if stored.get(k) != signature[k]]
+        differs = [k for k in {**signature, **stored} if stored.get(k) != signature.get(k)]
         if differs:
             raise FacegenError(f"checkpoint {path} was made with a different setup ({', '.join(differs)} "
                                "differ): train without resuming, or with another checkpoint folder",

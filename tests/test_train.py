@@ -287,5 +287,8 @@ def test_text_free_lips_keep_the_words_off_the_lips(tmp_path_factory, tmp_path):
         share[weight] = words_on_lips(out)
         if weight:
             assert read_metadata(out)["provenance"]["text_free_lips"] == weight
+            with pytest.raises(FacegenError, match="text_free_lips"):  # not resumed with another weight
+                train_toy(toy, out, epochs=4, init=str(tmp_path / "wordy.safetensors"), resume=True,
+                          **options)
     assert share["wordy"] > 0.05, share  # the perturbation did put the words on the lips
     assert share[4.0] < 0.5 * share[0.0], share
