@@ -63,8 +63,8 @@ class Batch:
         if self.coefficients is not None:
             pred = model.coefficients(self.mel, self.text, self.speaker, self.phones)[0]
             loss = coefficient_loss(pred, self.coefficients)
-            weight = getattr(coefficient_loss, "text_free_weight", 0.0)
-            if weight and self.text is not None:
+            weight = coefficient_loss.text_free_weight  # 0 unless the config allows it (audio and text)
+            if weight:
                 # the text-free pass: the lips from the sound and the phones alone (zero text features)
                 # fit the target, and the full pass's lips follow them: words move the upper face, not lips
                 free = model.coefficients(self.mel, torch.zeros_like(self.text), self.speaker, self.phones)[0]
@@ -153,7 +153,7 @@ def pca_targets(config: TrainConfig, data: TrainData, dev: torch.device, reporte
     regions = data.mesh.regions
     loss = CoefficientLoss(pca, regions.get("lips"), config.lip_weight, config.velocity_weight, dev,
                            upper=regions.get("upper_face"), upper_weight=config.upper_weight,
-                           text_free_weight=config.text_free_lips if config.modalities == "both" else 0.0)
+                           text_free_weight=config.text_free_lips)
     return PcaTargets(pca, mean, kept, coefficients, loss, CoefficientLoss(pca, None))
 
 
