@@ -67,7 +67,11 @@ def test_other_frame_rates_keep_the_motion(animator, at_25, fps):
     a = aperture(anim.vertices, anim.mesh)
     resampled = np.interp(np.arange(len(a25)) / 25.0, np.arange(len(a)) / fps, a)
     assert np.corrcoef(a25, resampled)[0, 1] > 0.97
-    assert abs(a.min() - a25.min()) < 0.05 and abs(a.max() - a25.max()) < 0.05  # cm: closures and peaks kept
+    # cm: closures and peaks kept as far as this rate samples them (the 25 fps motion at this rate's frame
+    # times: a peak between two 24 fps frames reads lower at 24 fps, by 0.06 cm on this clip)
+    sampled = np.interp(np.arange(len(a)) / fps, np.arange(len(a25)) / 25.0, a25)
+    assert abs(a.min() - sampled.min()) < 0.01 and abs(a.max() - sampled.max()) < 0.01
+    assert a.min() < 0.05 and a.max() > 0.9 * a25.max()
     assert np.array_equal(anim.audio, at_25.audio)
 
 
