@@ -85,8 +85,8 @@ def test_the_lips_move_twice_as_far_and_the_brows_not_at_all(pair):
 
     for region in ("mouth_lower_margin", "mouth_upper_margin"):
         assert moved(scaled, region) / moved(plain, region) == pytest.approx(2.0, rel=0.02)
-    # the brows move (8.8e-5 on average over the clip with the default model), and not at all at upper=0
-    assert moved(plain, "brows") > 5e-5 and moved(scaled, "brows") < 1e-3 * moved(plain, "brows")
+    # the brows move (3.0e-3 on average over the clip with the default model), and not at all at upper=0
+    assert moved(plain, "brows") > 1e-4 and moved(scaled, "brows") < 1e-3 * moved(plain, "brows")
     assert scaled.metadata["strength"] == {"lips": 2.0, "jaw": 1.0, "upper": 0.0}
     assert "strength" not in plain.metadata
 
