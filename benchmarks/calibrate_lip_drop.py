@@ -89,8 +89,8 @@ def for_share(share: float, mesh, geo, total_cm: float) -> tuple[float, float]:
 
 
 def teacher_on_take(take: calibrate_rig.Capture, mesh) -> dict[str, np.ndarray]:
-    """The rig's face from the take's recognised phones (the default speaker's style, the take's loudness),
-    solved into ARKit weights with shapes built on the rig as it is set now: {ARKit name: weights [T]}."""
+    """The rig's face from the take's recognised phones (the default speaker's style, the take's loudness and
+    formants), solved into ARKit weights with shapes built on the rig as it is set now: {ARKit name: [T]}."""
     from facegen.animation import Animation
     from facegen.arkit.shapes import build_shapes
     from facegen.arkit.solve import fit_arkit
@@ -101,7 +101,7 @@ def teacher_on_take(take: calibrate_rig.Capture, mesh) -> dict[str, np.ndarray]:
 
     style = SpeakerStyle.for_speaker(speaker_index(TRAIN_SPEAKERS[0]))  # a model's first speaker: its default
     vertices = rig_reference(take.phones, [], take.n, 25.0, Rig(mesh), alphabet="cmu", loudness=take.loudness,
-                             style=style)
+                             f1=take.f1, style=style)
     anim = Animation(vertices=vertices, faces=mesh.faces, fps=25.0,
                      template=np.asarray(mesh.vertices, np.float32), regions=mesh.regions)
     fit = fit_arkit(anim, shapes=build_shapes(mesh))

@@ -12,8 +12,9 @@ so the held-out half says whether it generalises.
 The parameters (facegen.synth.curves): a gain on every vowel's jaw opening and one per vowel class (open,
 mid, spread, rounded), the consonants' jaw dominance (how much a consonant between two vowels closes the jaw),
 the anticipation and carry-over time constants of coarticulation (the jaw's anticipation apart), the jaw
-opening of the in-breath before speech after a pause and the lips' ramp into and out of a p/b/m. Bounds keep
-them physical (see docs/real_faces.md for the published figures they are held against).
+opening of the in-breath before speech after a pause, the lips' ramp into and out of a p/b/m and how much
+a vowel's first formant opens its jaw (formant_exp; the rig reads each clip's loudness and formants). Bounds
+keep them physical (see docs/real_faces.md for the published figures they are held against).
 
     python benchmarks/calibrate_rig.py [benchmarks/results/real_faces_default.json] [--evals 300]
 """
@@ -50,6 +51,7 @@ PARAMS = {
     "round_close": (None, 0.0, 0.9),  # rounded lips pursed (facegen.synth.curves.ROUND_CLOSE)
     "w_close": (None, 0.0, 0.6),  # W's own lip_close (beside its rounding)
     "fv_close": (None, 0.0, 1.0),  # f/v's lip_close: the lower lip up against the upper teeth
+    "formant_exp": (None, 0.0, 3.0),  # a vowel's jaw x (its F1 / its usual F1) ** this (FORMANT_EXP)
 }
 # parameters that are entries of the VISEMES table
 TABLE = {"w_close": ("W", "lip_close"), "fv_close": ("FV", "lip_close")}
@@ -57,13 +59,27 @@ OPEN_CM = 0.2  # real aperture above which a frame is open speech (as real_faces
 
 
 def load(path: Path) -> list[dict]:
-    """The clips: name, real aperture [T] (cm), phones [(CMU, start, end)], words, fps 25."""
+    """The clips: name, real aperture [T] (cm), phones [(CMU, start, end)], words, fps 25, and the rig's
+    readings of the clip's audio (benchmarks/data/grid/NAME.mpg), its loudness and first formant (the corpus's
+    rig reads both)."""
+    import tempfile
+
+    from real_faces import DATA, extract_audio
+
+    from facegen.audio import load_audio
+    from facegen.synth.curves import formant_track, loudness_envelope
+
     result = json.loads(path.read_text())
     clips = []
-    for name, clip in sorted(result["clips"].items()):
-        real = np.asarray(clip["tracks"]["real"]["aperture"], np.float64)
-        clips.append({"name": name, "real": real, "phones": [tuple(p) for p in clip["phones"]],
-                      "words": clip["words"]})
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, clip in sorted(result["clips"].items()):
+            real = np.asarray(clip["tracks"]["real"]["aperture"], np.float64)
+            wav = Path(tmp) / f"{name}.wav"
+            extract_audio(DATA / f"{name}.mpg", wav)
+            audio, sr = load_audio(wav)
+            clips.append({"name": name, "real": real, "phones": [tuple(p) for p in clip["phones"]],
+                          "words": clip["words"], "loudness": loudness_envelope(audio, sr),
+                          "f1": formant_track(audio, sr)})
     return clips
 
 
@@ -75,7 +91,8 @@ def apply(params: dict) -> dict:
     old = {"VISEMES": dict(curves.VISEMES), "ANTICIPATION_S": curves.ANTICIPATION_S,
            "JAW_ANTICIPATION_S": curves.JAW_ANTICIPATION_S,
            "CARRYOVER_S": curves.CARRYOVER_S, "PRE_SPEECH_JAW": curves.PRE_SPEECH_JAW,
-           "CLOSE_RAMP_S": curves.CLOSE_RAMP_S, "ROUND_CLOSE": curves.ROUND_CLOSE}
+           "CLOSE_RAMP_S": curves.CLOSE_RAMP_S, "ROUND_CLOSE": curves.ROUND_CLOSE,
+           "FORMANT_EXP": curves.FORMANT_EXP}
     visemes = dict(old["VISEMES"])
     for vis, (target, dom_jaw, dom_lips) in old["VISEMES"].items():
         target = target.copy()
@@ -95,6 +112,7 @@ def apply(params: dict) -> dict:
     curves.PRE_SPEECH_JAW = params["pre_speech_jaw"]
     curves.CLOSE_RAMP_S = params["close_ramp_s"]
     curves.ROUND_CLOSE = params["round_close"]
+    curves.FORMANT_EXP = params["formant_exp"]
     return old
 
 
@@ -132,7 +150,8 @@ class Scorer:
         from facegen.lipsync import aperture
         from facegen.synth.curves import viseme_curves
 
-        lower = viseme_curves(clip["phones"], len(clip["real"]), 25.0, alphabet="cmu")
+        lower = viseme_curves(clip["phones"], len(clip["real"]), 25.0, alphabet="cmu",
+                              loudness=clip.get("loudness"), f1=clip.get("f1"))
         weights = np.zeros((len(lower), self.n_channels))
         weights[:, :self.n_lower] = lower
         return aperture(self.rig.pose(weights), self.geo)
@@ -219,7 +238,7 @@ class Capture:
 
         from facegen.audio import load_audio
         from facegen.runtime import SILENT
-        from facegen.synth.curves import loudness_envelope
+        from facegen.synth.curves import formant_track, loudness_envelope
         from facegen.word_timing import clip_words_and_phones
 
         take = arkit_capture.read_capture(csv_path)
@@ -229,14 +248,15 @@ class Capture:
         timing = clip_words_and_phones(audio, sr, self.n, 25.0, text=None, alignment=None, no_text=True,
                                        reporter=SILENT)
         self.phones = timing.phone_times or []
-        self.loudness = loudness_envelope(audio, sr)
+        self.loudness, self.f1 = loudness_envelope(audio, sr), formant_track(audio, sr)
 
     def rig_jaw(self, params: dict) -> np.ndarray:
         from facegen.synth.curves import viseme_curves
 
         old = apply(params)
         try:
-            return viseme_curves(self.phones, self.n, 25.0, alphabet="cmu", loudness=self.loudness)[:, 0]
+            return viseme_curves(self.phones, self.n, 25.0, alphabet="cmu", loudness=self.loudness,
+                                 f1=self.f1)[:, 0]
         finally:
             restore(old)
 

@@ -49,7 +49,7 @@ def measure(animator, code: str, text: str, k: int, folder: Path) -> dict:
     from facegen.espeak import synthesize
     from facegen.languages import check_language
     from facegen.lipsync import bilabial_midpoints, lipsync_metrics, speech_mask
-    from facegen.synth.curves import loudness_envelope
+    from facegen.synth.curves import formant_track, loudness_envelope
     from facegen.synth.reference import rig_reference
 
     voice = check_language(code).voice
@@ -67,7 +67,7 @@ def measure(animator, code: str, text: str, k: int, folder: Path) -> dict:
     phones = truth_phones(speech, voice)
     words = [(w.text, w.start + LEAD, w.end + LEAD) for w in speech.words]
     ref = rig_reference(phones, words, anim.num_frames, anim.fps, alphabet="cmu",
-                        loudness=loudness_envelope(audio, 16000))
+                        loudness=loudness_envelope(audio, 16000), f1=formant_track(audio, 16000))
     row = lipsync_metrics(np.asarray(anim.vertices), ref, animator.mesh(), anim.fps,
                           speech=speech_mask(words, anim.num_frames, anim.fps),
                           bilabials=bilabial_midpoints(phones, anim.fps, alphabet="cmu"))

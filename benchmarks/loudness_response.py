@@ -59,7 +59,7 @@ def run(model=None, *, data: Path = DATA, clips: int | None = None, log=print) -
     from facegen.audio import load_audio, write_wav
     from facegen.lipsync import FaceGeometry, aperture
     from facegen.synth.corpus import speaker_index
-    from facegen.synth.curves import SpeakerStyle, loudness_envelope
+    from facegen.synth.curves import SpeakerStyle, formant_track, loudness_envelope
     from facegen.synth.reference import rig_reference
 
     videos = sorted(data.glob("*.mpg"))[:clips]
@@ -88,7 +88,8 @@ def run(model=None, *, data: Path = DATA, clips: int | None = None, log=print) -
                 anim = animator.animate(path, text=text, blink_rate=0, head_motion=0)
                 model_ap = aperture(np.asarray(anim.vertices), face)
                 rig_ap = aperture(rig_reference(phones, [], anim.num_frames, float(anim.fps), alphabet="cmu",
-                                                loudness=loudness_envelope(louder, sr), style=style), face)
+                                                loudness=loudness_envelope(louder, sr),
+                                                f1=formant_track(louder, sr), style=style), face)
                 row[f"{db:+.0f}dB"] = {"model_cm": _peak(model_ap, last.start, last.end, float(anim.fps)),
                                        "rig_cm": _peak(rig_ap, last.start, last.end, float(anim.fps))}
             base = row["+0dB"]

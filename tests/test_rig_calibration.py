@@ -187,7 +187,7 @@ def test_calibrate_rig_follows_the_jaw_of_a_real_take(tmp_path):
     those parameters, less for today's."""
     from facegen.audio import load_audio
     from facegen.runtime import SILENT
-    from facegen.synth.curves import loudness_envelope
+    from facegen.synth.curves import formant_track, loudness_envelope
     from facegen.word_timing import clip_words_and_phones
 
     cr = _calibrate_rig()
@@ -200,7 +200,8 @@ def test_calibrate_rig_follows_the_jaw_of_a_real_take(tmp_path):
     truth = {**shipped, "schwa": 0.5, "anticipation_s": 0.05}
     old = cr.apply(truth)
     try:
-        jaw = viseme_curves(phones, n, 25.0, alphabet="cmu", loudness=loudness_envelope(audio, sr))[:, JAW]
+        jaw = viseme_curves(phones, n, 25.0, alphabet="cmu", loudness=loudness_envelope(audio, sr),
+                            f1=formant_track(audio, sr))[:, JAW]
     finally:
         cr.restore(old)
     t = np.arange(int(n / 25.0 * 60)) / 60.0

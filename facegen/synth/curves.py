@@ -115,6 +115,16 @@ PRE_SPEECH_S, PAUSE_S, PRE_SPEECH_JAW = 0.3, 0.3, 0.3
 PROSODY_DB = 12.0  # dB of vowel loudness above (below) the clip's median that open the mouth 1 + PROSODY_GAIN
 PROSODY_GAIN = 0.35  # (1 - PROSODY_GAIN) times wider (narrower); clipped to that range
 STRESS_GAIN = 0.12  # stressed vowels open this much more, unstressed this much less
+# How open a vowel is said shows in its first formant: F1 rises as the jaw lowers (Lindblom & Sundberg 1971).
+# With `f1` (see formant_track) each vowel's jaw target is scaled by (its F1 / its viseme's usual F1, over
+# the clip's median of that ratio: the speaker's vocal tract) ** FORMANT_EXP, clipped to 1/FORMANT_MAX to
+# FORMANT_MAX: a reduced vowel closes the jaw, an emphatic one opens it, beyond what its phone says. The
+# usual F1 are Hillenbrand et al. (1995)'s adult means (Hz); a diphthong's visemes take their own. Fitted on
+# a real iPhone take and checked on GRID's lips (docs/real_faces.md, ninth pass).
+VISEME_F1 = {"AA": 768.0, "AE": 588.0, "AH": 623.0, "AO": 652.0, "EH": 580.0, "ER": 474.0, "IH": 427.0,
+             "IY": 342.0, "OW": 497.0, "UH": 469.0, "UW": 378.0}
+FORMANT_EXP = 1.0
+FORMANT_MAX = 2.0
 
 
 def loudness_envelope(audio: np.ndarray, sample_rate: int, rate: float = 100.0) -> np.ndarray:
@@ -126,6 +136,41 @@ def loudness_envelope(audio: np.ndarray, sample_rate: int, rate: float = 100.0) 
     power = (energy[win:] - energy[:-win])[::hop] / win
     n = int(np.ceil(len(audio) / hop))
     return (10 * np.log10(np.maximum(power[:n], 1e-10))).astype(np.float32)
+
+
+def formant_track(audio: np.ndarray, sample_rate: int, rate: float = 100.0) -> np.ndarray:
+    """The first formant (Hz) of the clip sampled at `rate` Hz, NaN where the sound is quiet (35 dB under its
+    95th percentile) or shows no resonance: LPC of order 12 on 30 ms Hamming windows of the pre-emphasised
+    audio at 10 kHz, the lowest pole above 200 Hz with a bandwidth under 500 Hz (the textbook estimate, as
+    Praat's; librosa has the LPC but no formant tracker). `viseme_curves` reads the vowels' openness in it."""
+    import librosa
+
+    sr, order = 10000, 12
+    x = librosa.resample(np.asarray(audio, np.float64), orig_sr=sample_rate, target_sr=sr)
+    x = np.append(x[:1], x[1:] - 0.97 * x[:-1])
+    hop, win = sr / rate, int(0.03 * sr)
+    n = int(np.ceil(len(x) / hop))
+    out = np.full(n, np.nan, np.float32)
+    if n == 0:
+        return out
+    level = loudness_envelope(x, sr, rate)[:n]
+    starts = np.round(np.arange(n) * hop).astype(int)
+    keep = np.nonzero((level >= np.percentile(level, 95) - 35.0) & (starts + win // 2 <= len(x)))[0]
+    keep = keep[starts[keep] >= win // 2]
+    if len(keep) == 0:
+        return out
+    frames = np.lib.stride_tricks.sliding_window_view(x, win)[starts[keep] - win // 2] * np.hamming(win)
+    coeffs = librosa.lpc(frames, order=order, axis=-1)  # [K, order + 1], coeffs[:, 0] = 1
+    companion = np.zeros((len(keep), order, order))
+    companion[:, 0, :] = -coeffs[:, 1:]
+    companion[:, np.arange(1, order), np.arange(order - 1)] = 1.0
+    roots = np.linalg.eigvals(companion)  # the poles of each window's all-pole filter
+    freq = np.angle(roots) * sr / (2 * np.pi)
+    bandwidth = -sr / np.pi * np.log(np.maximum(np.abs(roots), 1e-12))
+    freq = np.where((np.imag(roots) > 0) & (freq > 200) & (bandwidth < 500), freq, np.inf)
+    lowest = freq.min(axis=1)
+    out[keep] = np.where(np.isfinite(lowest), lowest, np.nan)
+    return out
 
 
 def _phone_fields(phone) -> tuple[str, float, float]:
@@ -149,9 +194,36 @@ def _frame_average(values: np.ndarray, num_frames: int, fps: float) -> np.ndarra
     return out / np.maximum(counts, 1)[:, None]
 
 
+_JAW = LOWER_CHANNELS.index("jaw_open")
+
+
+def _formant_gains(segments: list, f1: np.ndarray | None, rate: float) -> list[float]:
+    """Each segment's jaw gain from the first formant over its middle half (`viseme_curves`, FORMANT_EXP): 1
+    for consonants, silence, vowels without a formant, and without `f1`."""
+    gains = [1.0] * len(segments)
+    if f1 is None or not FORMANT_EXP or not len(f1):
+        return gains
+    formant = np.asarray(f1, np.float64)
+
+    def middle(start: float, end: float) -> float:
+        a = int(np.clip((0.75 * start + 0.25 * end) * rate, 0, len(formant) - 1))
+        values = formant[a:max(a + 1, int(np.ceil((0.25 * start + 0.75 * end) * rate)))]
+        values = values[np.isfinite(values)]
+        return float(np.median(values)) if len(values) else np.nan
+
+    ratios = [middle(a, b) / VISEME_F1[vis] if vis in VISEME_F1 else np.nan for a, b, vis, _ in segments]
+    known = [r for r in ratios if np.isfinite(r)]
+    if not known:
+        return gains
+    speaker = float(np.median(known))
+    return [float(np.clip((r / speaker) ** FORMANT_EXP, 1 / FORMANT_MAX, FORMANT_MAX))
+            if np.isfinite(r) else 1.0 for r in ratios]
+
+
 def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
                   style: SpeakerStyle | None = None, *, alphabet: str = "espeak",
-                  loudness: np.ndarray | None = None, loudness_rate: float = 100.0) -> np.ndarray:
+                  loudness: np.ndarray | None = None, loudness_rate: float = 100.0,
+                  f1: np.ndarray | None = None) -> np.ndarray:
     """Lips and jaw [num_frames, len(LOWER_CHANNELS)] from phone timings (seconds; espeak mnemonics, or
     CMU phones with `alphabet="cmu"`).
 
@@ -163,7 +235,9 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     Prosody (as JALI's jaw and lip parameters): with `loudness` (dB sampled at `loudness_rate` Hz, see
     `loudness_envelope`) every vowel opens the jaw and shapes the lips more when it is louder than the
     clip's median vowel and less when quieter (PROSODY_DB, PROSODY_GAIN); stress marks on the phones add
-    STRESS_GAIN. Without either, the curves are those of the phones alone.
+    STRESS_GAIN. With `f1` (Hz at `loudness_rate`, see `formant_track`) each vowel's jaw opens as much more
+    or less than its phone's as its first formant says (VISEME_F1, FORMANT_EXP). Without them, the curves are
+    those of the phones alone.
     """
     check_alphabet(alphabet)
     style = style or SpeakerStyle()
@@ -212,6 +286,8 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
                         if np.isfinite(lv) else (a, b, vis, g)
                         for (a, b, vis, g), lv in zip(segments, levels, strict=True)]
 
+    jaw_gains = _formant_gains(segments, f1, loudness_rate)
+
     C = len(LOWER_CHANNELS)
     lips = np.array([c != "jaw_open" for c in LOWER_CHANNELS])
     is_close = np.array([c == "lip_close" for c in LOWER_CHANNELS])
@@ -219,11 +295,13 @@ def viseme_curves(phones: Sequence, num_frames: int, fps: float = 25.0,
     den = np.full((n, C), 1e-9)
     ahead = np.where(lips, ANTICIPATION_S, JAW_ANTICIPATION_S) * style.coarticulation  # [C]
     behind = CARRYOVER_S * style.coarticulation
-    for start, end, vis, gain in segments:
+    for (start, end, vis, gain), jaw_gain in zip(segments, jaw_gains, strict=True):
         _, dom_jaw, dom_lips = VISEMES[vis]
         target = _v(jaw_open=PRE_SPEECH_JAW) if vis == "inhale" else held_target(vis)
         if gain != 1.0:
             target = np.where(is_close, target, np.clip(target * gain, 0.0, 1.0))
+        if jaw_gain != 1.0:
+            target[_JAW] = min(target[_JAW] * jaw_gain, 1.0)
         centre, half = (start + end) / 2, (end - start) / 2
         dt = t - centre
         away = np.maximum(np.abs(dt) - half * (1.0 if vis == "rest" else 0.8), 0.0)
@@ -330,11 +408,11 @@ def blink_curves(num_frames: int, fps: float, rng: np.random.Generator,
 def motion_curves(phones: Sequence, words: Sequence, num_frames: int, fps: float = 25.0,
                   style: SpeakerStyle | None = None, rng: np.random.Generator | None = None,
                   lexicon: dict[str, Emotion] | None = None, *, alphabet: str = "espeak",
-                  loudness: np.ndarray | None = None) -> np.ndarray:
+                  loudness: np.ndarray | None = None, f1: np.ndarray | None = None) -> np.ndarray:
     """All rig channels [num_frames, len(CHANNELS)]: visemes, expressions and blinks, in CHANNELS order
-    (`alphabet` and `loudness`: see viseme_curves)."""
+    (`alphabet`, `loudness` and `f1`: see viseme_curves)."""
     rng = rng if rng is not None else np.random.default_rng(0)
     return np.concatenate([viseme_curves(phones, num_frames, fps, style, alphabet=alphabet,
-                                         loudness=loudness),
+                                         loudness=loudness, f1=f1),
                            expression_curves(words, num_frames, fps, lexicon, style),
                            blink_curves(num_frames, fps, rng, style)], 1)

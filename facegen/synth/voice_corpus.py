@@ -208,7 +208,7 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
     from facegen.audio import num_frames, resample, write_wav
     from facegen.synth.augment import augment, loudness_drift
     from facegen.synth.corpus import speaker_index
-    from facegen.synth.curves import SpeakerStyle, loudness_envelope, motion_curves
+    from facegen.synth.curves import SpeakerStyle, formant_track, loudness_envelope, motion_curves
     from facegen.synth.voices import synthesize
     from facegen.words import Word
 
@@ -224,16 +224,18 @@ def make_take(take: Take, out: Path, augmentation: bool = True) -> dict:
         clean, drift = loudness_drift(clean, RATE, np.random.default_rng([take.seed, 2]))
         if drift is not None:
             speaker_changes["loudness_drift"] = drift
-    loud = loudness_envelope(clean, RATE)
+    loud, f1 = loudness_envelope(clean, RATE), formant_track(clean, RATE)
     audio, scale, applied = augment(clean, RATE, take.seed) if augmentation else (clean, 1.0, {})
     applied = {**speaker_changes, **applied}
-    if scale != 1.0:  # tempo: the loudness curve and every time stretch with the audio
-        loud = np.interp(np.arange(int(np.ceil(len(loud) * scale))) / scale, np.arange(len(loud)), loud)
+    if scale != 1.0:  # tempo: the loudness and formant curves and every time stretch with the audio
+        at = np.arange(int(np.ceil(len(loud) * scale))) / scale
+        loud = np.interp(at, np.arange(len(loud)), loud)
+        f1 = f1[np.clip(np.round(at).astype(int), 0, len(f1) - 1)] if len(f1) else f1
     words, phones = _scaled(words, scale), _scaled(phones, scale)
     frames = num_frames(len(audio) / RATE, FPS)
     style = SpeakerStyle.for_speaker(speaker_index(take.subject))
     curves = motion_curves(phones, [Word(*w) for w in words], frames, FPS, style,
-                           np.random.default_rng([take.seed, 1]), alphabet=utt.alphabet, loudness=loud)
+                           np.random.default_rng([take.seed, 1]), alphabet=utt.alphabet, loudness=loud, f1=f1)
     for folder in ("wav", "curves", "alignments", "text", "meta"):
         (out / folder).mkdir(exist_ok=True)
     with atomic_path(out / "wav" / f"{take.name}.wav") as tmp:
