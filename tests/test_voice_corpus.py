@@ -245,3 +245,31 @@ def test_pauses_move_the_timings_with_the_silence_they_insert():
             assert jaw[0] < 0.02 and jaw[int(lead * 25) - 2] > 0.1
             seen_lead += 1
     assert 3 <= seen_pause <= 17 and seen_lead >= 5  # drawn, not always
+
+
+def test_a_takes_jaw_reads_its_vowels_formants(tmp_path):
+    """The rig animates each take from its own audio's loudness and first formant (facegen.synth.curves): an
+    unaugmented take's stored curves are the rig's curves with the formants of its audio, and differ from
+    those without them in the jaw alone."""
+    from facegen.face.rig import LOWER_CHANNELS
+    from facegen.synth.corpus import speaker_index
+    from facegen.synth.curves import SpeakerStyle, formant_track, loudness_envelope, viseme_curves
+
+    if "espeak" not in _engines():
+        pytest.skip("needs espeak-ng (make voices)")
+    take = next(t for t in vc.plan() if t.split == "train" and t.voice.startswith("espeak:en"))
+    vc.make_take(take, tmp_path, augmentation=False)
+    audio, rate = load_audio(tmp_path / "wav" / f"{take.name}.wav")
+    stored = np.load(tmp_path / "curves" / f"{take.name}.npy")[:, :len(LOWER_CHANNELS)]
+    align = json.loads((tmp_path / "alignments" / f"{take.name}.json").read_text())
+    phones = [(p["phone"], p["start"], p["end"]) for p in align["phones"]]
+    style = SpeakerStyle.for_speaker(speaker_index(take.subject))
+    loud = loudness_envelope(audio, rate)
+    heard = viseme_curves(phones, len(stored), vc.FPS, style, alphabet=align["alphabet"], loudness=loud,
+                          f1=formant_track(audio, rate))
+    plain = viseme_curves(phones, len(stored), vc.FPS, style, alphabet=align["alphabet"], loudness=loud)
+    jaw = LOWER_CHANNELS.index("jaw_open")
+    assert np.abs(stored - heard).max() < 0.02  # (the stored WAV is 16-bit)
+    assert np.abs(stored[:, jaw] - plain[:, jaw]).max() > 0.05
+    others = [c for c in range(len(LOWER_CHANNELS)) if c != jaw]
+    np.testing.assert_allclose(stored[:, others], plain[:, others], atol=0.02)
