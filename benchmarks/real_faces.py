@@ -185,10 +185,12 @@ def _pct(x: np.ndarray) -> list[float]:
     return [float(np.percentile(x, 5)), float(np.percentile(x, 95))]
 
 
-def measure_clip(real, fg, geo, words, phones, loudness, fps) -> dict:
+def measure_clip(real, fg, geo, words, phones, loudness, fps, geo_width=None) -> dict:
     """The per-clip numbers: `real` and `fg` are Tracks of the same length, `geo` facegen's geometric aperture
-    (cm, facegen.lipsync.aperture). facegen's timing (closures, leads) is read off `geo`: the tracker does not
-    see facegen's openings under ~0.45 cm (`response_curve`), so its closures would last through them."""
+    (cm, facegen.lipsync.aperture), `geo_width` its geometric mouth width's change from the neutral face (cm,
+    facegen.lipsync.mouth_width; the tracker misreads facegen's width). facegen's timing (closures, leads) is
+    read off `geo`: the tracker does not see facegen's openings under ~0.45 cm (`response_curve`), so its
+    closures would last through them."""
     from facegen.lipsync import bilabial_midpoints, lagged_r, speech_mask
 
     n = len(real)
@@ -238,9 +240,8 @@ def measure_clip(real, fg, geo, words, phones, loudness, fps) -> dict:
         out[f"rest_width_{who}_cm"] = w0 = rest_width(tr, talking)
         ap = geo if who == "facegen" else tr.aperture  # relative opening: over the clip's 95th percentile
         extra = {"aperture_rel": ap / max(np.percentile(ap, 95), 1e-6)}
-        out[f"vowels_{who}"] = vowel_values(
-            tr, phones, fps, w0, extra | ({"geometric": geo} if who == "facegen" else {})
-        )
+        mine = {"geometric": geo} | ({} if geo_width is None else {"geometric_width_change": geo_width[:n]})
+        out[f"vowels_{who}"] = vowel_values(tr, phones, fps, w0, extra | (mine if who == "facegen" else {}))
     out["facegen_tracked_vs_geometric_r"] = lagged_r(fg.aperture, geo, 0)
     out["facegen_tracked_over_geometric"] = median_ratio(fg.aperture, geo, geo > OPEN_CM)
     out["tracks"] = {
@@ -271,7 +272,7 @@ def run(
     import facegen
     from facegen.align import align_phones
     from facegen.audio import load_audio
-    from facegen.lipsync import FaceGeometry
+    from facegen.lipsync import FaceGeometry, mouth_width
     from facegen.lipsync import aperture as geometric_aperture
     from facegen.synth.curves import loudness_envelope
 
@@ -281,6 +282,7 @@ def run(
     start = time.perf_counter()
     animator = facegen.Animator(model)
     face = FaceGeometry.of(animator.mesh())  # facegen's geometric aperture, for the tracker check
+    neutral_width = float(mouth_width(face.template[None], face)[0])
     per_clip: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -297,6 +299,7 @@ def run(
             frames = tmp / f"{name}_facegen.npy"
             render_frames(anim, frames, lit_cavity)
             geo = geometric_aperture(np.asarray(anim.vertices), face)
+            geo_width = mouth_width(np.asarray(anim.vertices), face) - neutral_width
             made.append(
                 (
                     name,
@@ -308,15 +311,16 @@ def run(
                     loudness_envelope(audio, sr),
                     geo,
                     float(anim.fps),
+                    geo_width,
                 )
             )
             log(f"  {name}: animated and rendered ({time.perf_counter() - start:.0f} s)")
         tracked = track([p for m in made for p in (m[2], m[3])], tmp / "landmarks.npz")
         log(f"  tracked {len(tracked)} videos ({time.perf_counter() - start:.0f} s)")
-    for k, (name, text, _, _, words, phones, loudness, geo, fps) in enumerate(made):
+    for k, (name, text, _, _, words, phones, loudness, geo, fps, geo_width) in enumerate(made):
         real, fg = tracks_of(tracked[2 * k]), tracks_of(tracked[2 * k + 1])
         n = min(len(real), len(fg))
-        row = measure_clip(real.cut(n), fg.cut(n), geo, words, phones, loudness, fps)
+        row = measure_clip(real.cut(n), fg.cut(n), geo, words, phones, loudness, fps, geo_width)
         row.update(transcript=text, words=words, phones=phones)
         grid = data / f"{name[-6:]}.align"
         if grid.exists():  # GRID's own word times: how far pocketsphinx's are from them

@@ -250,7 +250,8 @@ def vowel_class(viseme: str) -> str | None:
 
 
 def summarize_vowels(
-    rows: Sequence[dict], keys=("aperture", "aperture_rel", "jaw", "width_change", "geometric")
+    rows: Sequence[dict], keys=("aperture", "aperture_rel", "jaw", "width_change", "geometric",
+                                "geometric_width_change")
 ) -> dict:
     """Per viseme and per class (VOWEL_CLASSES): n and the median of each of `keys` the rows have."""
     keys = [k for k in keys if rows and all(k in r for r in rows)]

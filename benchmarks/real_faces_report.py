@@ -139,7 +139,8 @@ def table(result: dict) -> str:
         "",
         (
             "| vowel | n | aperture real / facegen tracked / facegen geometric (cm) | relative opening "
-            "real / facegen geometric | jaw real / facegen (cm) | width change real / facegen (cm) |"
+            "real / facegen geometric | jaw real / facegen (cm) | width change real / facegen tracked / "
+            "facegen geometric (cm) |"
         ),
         "|---|---|---|---|---|---|",
     ]
@@ -150,7 +151,8 @@ def table(result: dict) -> str:
             f"| {key} | {a['n']} | {_f(a['aperture'])} / {_f(b.get('aperture'))} / "
             f"{_f(b.get('geometric'))} | {_f(a['aperture_rel'])} / {_f(b.get('aperture_rel'))} | "
             f"{_f(a['jaw'])} / {_f(b.get('jaw'))} | "
-            f"{_f(a['width_change'], '{:+.2f}')} / {_f(b.get('width_change'), '{:+.2f}')} |"
+            f"{_f(a['width_change'], '{:+.2f}')} / {_f(b.get('width_change'), '{:+.2f}')} / "
+            f"{_f(b.get('geometric_width_change'), '{:+.2f}')} |"
         )
     lines.append("")
     lines.append(

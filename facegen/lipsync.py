@@ -44,7 +44,8 @@ TARGETS: dict[str, tuple[float | None, float | None]] = {
 @dataclass(frozen=True)
 class FaceGeometry:
     """What the metrics need from a face, computed once: `upper`/`lower` are the facing margin vertices
-    of the middle third of the mouth (the k-th upper faces the k-th lower), `cm` mesh units per cm."""
+    of the middle third of the mouth (the k-th upper faces the k-th lower), `margins` all the mouth's margin
+    vertices (its corners among them), `cm` mesh units per cm."""
 
     template: np.ndarray  # [V, 3] float64
     upper: np.ndarray
@@ -52,6 +53,7 @@ class FaceGeometry:
     cm: float
     lips: np.ndarray
     upper_face: np.ndarray
+    margins: np.ndarray
 
     @classmethod
     def of(cls, mesh: Mesh | FaceGeometry) -> FaceGeometry:
@@ -69,7 +71,9 @@ class FaceGeometry:
         upper, lower = mouth_middle(reg)
         t = np.asarray(mesh.vertices, np.float64)
         _, cm = face_scale(t, reg)
-        return cls(template=t, upper=upper, lower=lower, cm=cm, lips=reg[LIPS], upper_face=reg[UPPER_FACE])
+        margins = np.concatenate([reg["mouth_upper_margin"], reg["mouth_lower_margin"]])
+        return cls(template=t, upper=upper, lower=lower, cm=cm, lips=reg[LIPS], upper_face=reg[UPPER_FACE],
+                   margins=margins)
 
 
 def _frames(vertices: np.ndarray, geo: FaceGeometry, what: str) -> np.ndarray:
@@ -87,6 +91,14 @@ def aperture(vertices: np.ndarray, mesh: Mesh | FaceGeometry) -> np.ndarray:
     v = _frames(vertices, geo, "the vertices")
     gap = v[:, geo.upper, 1].astype(np.float64) - v[:, geo.lower, 1].astype(np.float64)
     return gap.mean(1) / geo.cm
+
+
+def mouth_width(vertices: np.ndarray, mesh: Mesh | FaceGeometry) -> np.ndarray:
+    """Mouth width [T] in cm of vertices [T, V, 3]: across the face (x) from the mouth margins' leftmost
+    vertex to their rightmost (corner to corner), as a face tracker reads it from the front."""
+    geo = FaceGeometry.of(mesh)
+    x = _frames(vertices, geo, "the vertices")[:, geo.margins, 0].astype(np.float64)
+    return (x.max(1) - x.min(1)) / geo.cm
 
 
 # ------------------------------------------------------------------------------------------- timings

@@ -14,6 +14,7 @@ from facegen.lipsync import (
     bilabial_midpoints,
     format_lipsync,
     lipsync_metrics,
+    mouth_width,
     speech_mask,
     upper_face_response,
 )
@@ -69,6 +70,23 @@ def test_a_hand_made_shift_of_the_lower_margin(face):
     v[1, face.regions["mouth_lower_margin"], 1] -= 0.3 * geo.cm
     ap = aperture(v, face)
     assert ap[1] - ap[0] == pytest.approx(0.3, abs=1e-5)
+
+
+def test_mouth_width_reads_the_corners_and_how_rounding_and_spreading_move_them(face, rig):
+    """Corner to corner across the face: the neutral face's mouth is ~4.9 cm wide; a hand-made shift of the
+    rightmost margin vertex widens it by exactly that much; the rig's spread lips widen it, its rounded lips
+    narrow it, the jaw alone leaves it (docs/real_faces.md: width read geometrically)."""
+    geo = FaceGeometry.of(face)
+    rest = mouth_width(face.vertices[None], face)
+    assert rest.shape == (1,) and 4.5 < rest[0] < 5.3
+    v = np.repeat(face.vertices[None], 2, 0).copy()
+    right = geo.margins[np.argmax(face.vertices[geo.margins, 0])]
+    v[1, right, 0] += 0.2 * geo.cm
+    assert mouth_width(v, face)[1] - rest[0] == pytest.approx(0.2, abs=1e-6)
+    wide, rounded, jaw = mouth_width(rig.pose(rig_weights(3, lip_wide=np.array([1.0, 0, 0]),
+                                                          lip_round=np.array([0, 1.0, 0]),
+                                                          jaw_open=np.array([0, 0, 1.0]))), face) - rest[0]
+    assert wide > 0.5 and rounded < -0.5 and abs(jaw) < 0.05, (wide, rounded, jaw)
 
 
 @pytest.fixture(scope="module")
