@@ -87,7 +87,7 @@ VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
 # speakers at the middle of a W: 0.15 cm, of UW: 0.50 cm, of open vowels 1.2-1.4 cm; docs/real_faces.md).
 # A viseme's lip_close target is its own plus ROUND_CLOSE x its lip_round.
 ROUND_CLOSE = 0.53
-_CLOSE, _ROUND = LOWER_CHANNELS.index("lip_close"), LOWER_CHANNELS.index("lip_round")
+_CLOSE, _ROUND, _JAW = (LOWER_CHANNELS.index(c) for c in ("lip_close", "lip_round", "jaw_open"))
 
 
 def held_target(vis: str) -> np.ndarray:
@@ -192,9 +192,6 @@ def _frame_average(values: np.ndarray, num_frames: int, fps: float) -> np.ndarra
     np.add.at(out, frame, values)
     counts = np.bincount(frame, minlength=num_frames).astype(float)
     return out / np.maximum(counts, 1)[:, None]
-
-
-_JAW = LOWER_CHANNELS.index("jaw_open")
 
 
 def _formant_gains(segments: list, f1: np.ndarray | None, rate: float) -> list[float]:
