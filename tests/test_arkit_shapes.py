@@ -100,6 +100,26 @@ def test_pucker_closes_the_lips_and_pushes_them_forward_funnel_parts_them(shapes
     assert gap("mouthFunnel") > 3.0
 
 
+def test_pucker_and_stretch_move_the_corners_further_than_speech_does(shapes, face, rig):
+    """mouthPucker and mouthStretch keep ARKit's meaning when the rig's speech rounding and spreading are
+    calibrated on real speakers (rig.ROUND_NARROW, WIDE_SPREAD): at weight 1 the mouth is 1.5-2 cm narrower
+    and 0.9-1.4 cm wider, where the rig's lip_round and lip_wide move it 0.3-0.8 and 0.1-0.4 cm. Stretch is
+    the rig's spreading with the corners drawn out further: the same up-down and in-out offsets."""
+    from facegen.lipsync import mouth_width
+
+    v = face.vertices
+    rest = mouth_width(v[None], face)[0]
+
+    def width(offsets: np.ndarray) -> float:
+        return float(mouth_width((v + offsets)[None], face)[0] - rest)
+
+    stretch = shapes.offset("mouthStretchLeft") + shapes.offset("mouthStretchRight")
+    spread = _pose(rig, lip_wide=1.0) - v
+    assert -2.0 <= width(shapes.offset("mouthPucker")) <= -1.5 and 0.9 <= width(stretch) <= 1.4
+    assert -0.8 <= width(_pose(rig, lip_round=1.0) - v) <= -0.3 and 0.1 <= width(spread) <= 0.4
+    assert np.abs(stretch[:, 1:] - spread[:, 1:]).max() < 1e-6
+
+
 def test_blink_left_closes_the_left_eye_only(shapes, face):
     r, v = face.regions, face.vertices
     blink = v + shapes.offset("eyeBlinkLeft")
@@ -160,7 +180,7 @@ def test_left_and_right_mirror_each_other(shapes, face):
 def test_left_plus_right_is_the_rig_motion(shapes, face, rig):
     v = face.vertices
     pairs = {"eyeBlink": {"blink": 1.0}, "eyeWide": {"lid_widen": 1.0}, "browDown": {"brow_frown": 1.0},
-             "mouthUpperUp": {"upper_lip_raise": 1.0}, "mouthStretch": {"lip_wide": 1.0}}
+             "mouthUpperUp": {"upper_lip_raise": 1.0}}
     for name, channels in pairs.items():
         both = shapes.offset(name + "Left") + shapes.offset(name + "Right")
         assert np.abs(both - (_pose(rig, **channels) - v)).max() < 1e-6, name

@@ -250,3 +250,52 @@ def test_the_lower_lip_drops_with_the_jaw_as_a_real_capture_reads_it():
     assert w["mouthLowerDownLeft"] == pytest.approx(w["mouthLowerDownRight"], abs=1e-3)
     others = [n for n in fit.names if n.startswith("mouth") and not n.startswith("mouthLowerDown")]
     assert max(abs(w[n]) for n in others) < 0.05, {n: w[n] for n in others if abs(w[n]) >= 0.05}
+
+
+def test_rounding_and_spreading_move_the_mouths_width_as_far_as_real_speakers(rig):
+    """GRID's speakers at the middle of their vowels, mouth width against rest (tracked corners, cm): UW
+    -0.40, rounded vowels -0.25, IY +0.10, spread +0.03 (benchmarks/calibrate_width.py, docs/real_faces.md).
+    The rig's held targets stay within what running speech can reach from them: a held UW narrows the mouth
+    by 0.3-0.8 cm (it was 1.72 before the calibration), a held IY widens it by 0.05-0.35 cm (was 0.96);
+    rounding still narrows more than spreading widens, and an AA (the jaw) moves the width under 0.1 cm."""
+    from facegen.face import rig as rig_module
+    from facegen.face.template import load_template
+    from facegen.lipsync import mouth_width
+
+    assert 0.06 <= rig_module.ROUND_NARROW <= 0.2 and 0.0 <= rig_module.WIDE_SPREAD <= 0.1
+    pose, _ = rig
+    face = load_template()
+    held = np.zeros((3, len(CHANNELS)), np.float32)
+    for k, vis in enumerate(("UW", "IY", "AA")):
+        held[k, :len(LOWER_CHANNELS)] = held_target(vis)
+    uw, iy, aa = mouth_width(pose.pose(held), face) - mouth_width(face.vertices[None], face)[0]
+    assert -0.8 <= uw <= -0.3 and 0.05 <= iy <= 0.35 and abs(aa) < 0.1 and -uw > iy, (uw, iy, aa)
+
+
+def test_calibrate_width_finds_the_rigs_own_widths(tmp_path):
+    """benchmarks/calibrate_width.py on 'real' width changes made by the rig itself (its widths at the vowels'
+    middles of three GRID clips): the shipped values score 0 and twice the rounding scores worse; the
+    widths come back with the rig's values and the constants are restored."""
+    import json
+
+    _calibrate_rig()  # benchmarks/ on the path
+    import calibrate_width as cw
+
+    from facegen.face import rig as rig_module
+
+    result = json.loads((BENCH / "results" / "real_faces_f1au.json").read_text())
+    names = ["bbaf2n", "lbbc2a", "swiz3n"]
+    clips = [{"name": n, "real": np.zeros(len(result["clips"][n]["tracks"]["real"]["aperture"])),
+              "phones": [tuple(p) for p in result["clips"][n]["phones"]], "loudness": None, "f1": None}
+             for n in names]  # "blue", "two": UW; "z", "three": IY
+    vowels = [[{**row, "width_change": 0.0} for row in result["clips"][n]["vowels_real"]] for n in names]
+    shipped = rig_module.ROUND_NARROW, rig_module.WIDE_SPREAD
+    own = cw.rig_widths(clips, vowels, *shipped)
+    assert (rig_module.ROUND_NARROW, rig_module.WIDE_SPREAD) == shipped  # restored
+    for rows, widths in zip(vowels, own):
+        for row, w in zip(rows, widths):
+            row["width_change"] = w
+    found = cw.medians(vowels, own)
+    assert cw.score(found) == pytest.approx(0.0, abs=1e-9)
+    assert found["UW"][1] == pytest.approx(found["UW"][2]) and found["UW"][2] < -0.2, found["UW"]
+    assert cw.score(cw.medians(vowels, cw.rig_widths(clips, vowels, 2 * shipped[0], shipped[1]))) > 0.1

@@ -49,6 +49,14 @@ JAW_MAX_ANGLE = 0.273  # rad
 LIP_DROP_CM = 0.31
 LOWER_LIP_FORWARD = 0.15  # cm the lower lip comes forward per cm it is drawn down (it everts)
 ROUND_FORWARD = 0.4  # cm the skin beside the mouth's corners comes forward at full rounding (lip_round)
+# How far rounding draws the mouth's corners in and spreading draws them out: each corner moves across the
+# face by this fraction of its distance from the mouth's centre at full lip_round / lip_wide. Set on GRID's
+# speakers (benchmarks/calibrate_width.py, docs/real_faces.md, tenth pass): at their vowels' middles the
+# tracked mouth is 0.25 cm narrower than at rest for rounded vowels (UW 0.40), 0.03 cm wider for spread ones
+# (IY 0.10); the rig posed from the same clips' phones gives -0.35 (UW -0.43), +0.04 (IY +0.11). Before this
+# (0.36 and 0.24, set by eye) it gave -1.13 (UW -1.39) and +0.29 (IY +0.60).
+ROUND_NARROW = 0.11
+WIDE_SPREAD = 0.05
 
 
 def falloff(d: np.ndarray, radius: float) -> np.ndarray:
@@ -167,10 +175,10 @@ class Rig:
         # is drawn in (ROUND_FORWARD), else it would pass into the dental arch (a held OW: 1.7 mm into the
         # canines)
         forward = ROUND_FORWARD * np.abs(Xc) / half * wide_round
-        off["lip_round"] = field(dx=-0.36 * Xc * wide_round, dy=sgn * 0.22 * near * opening**0.7,
+        off["lip_round"] = field(dx=-ROUND_NARROW * Xc * wide_round, dy=sgn * 0.22 * near * opening**0.7,
                                  dz=0.5 * peri_round**2 + 0.25 * near + forward)
-        off["lip_wide"] = field(dx=0.24 * Xc * peri, dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near,
-                                dz=-0.18 * peri)
+        off["lip_wide"] = field(dx=WIDE_SPREAD * Xc * peri,
+                                dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near, dz=-0.18 * peri)
         off["lip_funnel"] = field(dx=-0.18 * Xc * peri, dy=sgn * 0.3 * near * opening**0.3,
                                   dz=0.5 * peri**2 + 0.15 * near)
         off["lower_lip_tuck"] = field(dy=0.38 * w_lo * lat + 0.06 * w_up * lat, dz=-0.5 * w_lo * lat)
@@ -209,9 +217,10 @@ class Rig:
         w_squint = sm(falloff(d_lid_lo, 0.9) * lower_lid)
         off["cheek_raise"] = field(dx=0.4 * np.tanh(X / 1.0) * w_corner, dy=0.45 * w_corner + 0.3 * w_cheek
                                    + 0.12 * w_squint, dz=-0.12 * w_corner + 0.25 * w_cheek)
-        self.mouth_centre, self.mouth_half = mouth_centre, half
+        self.mouth_centre, self.mouth_half = mouth_centre, half  # half: cm
         self.fields = {"mouth_x": X, "upper_side": upper_side, "d_up": d_up, "d_lo": d_lo, "d_m": d_m,
-                       "lat": lat, "near": near, "peri": peri, "w_up": w_up, "w_lo": w_lo, "brow": w_brow,
+                       "lat": lat, "near": near, "peri": peri, "wide_round": wide_round, "w_up": w_up,
+                       "w_lo": w_lo, "brow": w_brow,
                        "corner": w_corner, "d_corner": d_corner, "lat_wide": lat_wide, "lower_lip": lower_lip,
                        "cheek": w_cheek, "d_cheek": d_cheek, "squint": w_squint}
         self._linear = [c for c in CHANNELS if c in off]
