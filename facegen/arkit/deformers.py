@@ -16,7 +16,6 @@ from facegen.face.rig import (
     CHANNELS,
     JAW_MAX_ANGLE,
     LOWER_LIP_FORWARD,
-    ROUND_NARROW,
     WIDE_SPREAD,
     Rig,
     falloff,
@@ -35,11 +34,12 @@ PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind
 # iPhone), linear as every blend shape is; mouthClose is the lips shut against that jaw.
 JAW_OPEN_ANGLE = 0.66  # rad
 JAW_OPEN_SCALE = JAW_OPEN_ANGLE / JAW_MAX_ANGLE  # jawOpen 1 is this many of the rig's jaw turns (2.42)
-# ARKit's mouthPucker (a kiss) and mouthStretch (the corners drawn out) move the mouth's corners further
-# than speech's rounding and spreading do (the rig's ROUND_NARROW, WIDE_SPREAD, set on GRID's speakers): each
-# corner moves across the face by this fraction of its distance from the mouth's centre, the mouth 1.7 cm
-# narrower and 1.1 cm wider at weight 1. A spoken /u/ is then part of a pucker, as an iPhone reads it.
-PUCKER_NARROW = 0.36
+# ARKit's mouthStretch draws the corners out further than speech's spreading does (the rig's WIDE_SPREAD, set
+# on GRID's speakers): each corner moves across the face by this fraction of its distance from the mouth's
+# centre, the mouth 1.1 cm wider at weight 1 (the rig's lip_wide: 0.24 cm). On a real iPhone take the rig's
+# speech then solves to a mouthStretch range 0.33x the capture's; with the stretch the rig's own, 3.6x
+# (docs/arkit_capture.md). mouthPucker stays the rig's rounding: with a narrower kiss the fit cancels its
+# width with mouthStretch (r 0.98 between the two).
 STRETCH_SPREAD = 0.24
 
 
@@ -173,9 +173,7 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["mouthFunnel"] = d.delta(lip_funnel=1.0)
     # ARKit's pucker is the closed lips contracted and pushed forward (a kiss): the rig's rounding alone parts
     # them 4 mm, and a pursed W or /u/ (facegen.synth.curves.ROUND_CLOSE) would read as mouthClose
-    Xc = np.clip(X, -d.rig.mouth_half, d.rig.mouth_half)
-    out["mouthPucker"] = d.delta(lip_round=1.0, lip_close=1.0) + d.vec(
-        dx=-(PUCKER_NARROW - ROUND_NARROW) * Xc * f["wide_round"])
+    out["mouthPucker"] = d.delta(lip_round=1.0, lip_close=1.0)
     out["mouthRollLower"] = d.delta(lower_lip_tuck=1.0)
     # the upper lip's margin curls in over the teeth (down and back), the skin above it hardly moves
     out["mouthRollUpper"] = d.vec(dy=-0.25 * near * upper * lat - 0.05 * w_lo * lat,
@@ -188,6 +186,7 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     d.sided(out, "cheekSquint", d.delta(cheek_raise=1.0) - smile)
     d.sided(out, "mouthFrown", d.vec(dx=0.1 * np.tanh(X) * corner, dy=-0.45 * corner, dz=-0.05 * corner))
     d.sided(out, "mouthDimple", d.vec(dx=0.15 * np.tanh(X) * corner, dy=0.05 * corner, dz=-0.35 * corner))
+    Xc = np.clip(X, -d.rig.mouth_half, d.rig.mouth_half)
     stretch = d.delta(lip_wide=1.0) + d.vec(dx=(STRETCH_SPREAD - WIDE_SPREAD) * Xc * f["peri"])
     d.sided(out, "mouthStretch", stretch)
     lat_wide = f["lat_wide"]

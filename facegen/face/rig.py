@@ -219,8 +219,7 @@ class Rig:
                                    + 0.12 * w_squint, dz=-0.12 * w_corner + 0.25 * w_cheek)
         self.mouth_centre, self.mouth_half = mouth_centre, half  # half: cm
         self.fields = {"mouth_x": X, "upper_side": upper_side, "d_up": d_up, "d_lo": d_lo, "d_m": d_m,
-                       "lat": lat, "near": near, "peri": peri, "wide_round": wide_round, "w_up": w_up,
-                       "w_lo": w_lo, "brow": w_brow,
+                       "lat": lat, "near": near, "peri": peri, "w_up": w_up, "w_lo": w_lo, "brow": w_brow,
                        "corner": w_corner, "d_corner": d_corner, "lat_wide": lat_wide, "lower_lip": lower_lip,
                        "cheek": w_cheek, "d_cheek": d_cheek, "squint": w_squint}
         self._linear = [c for c in CHANNELS if c in off]
