@@ -16,6 +16,7 @@ from facegen.face.rig import (
     CHANNELS,
     JAW_MAX_ANGLE,
     LOWER_LIP_FORWARD,
+    STRETCH_SPREAD,
     WIDE_SPREAD,
     Rig,
     falloff,
@@ -34,13 +35,6 @@ PUFF_AXIS_CM = 4.0  # cheekPuff pushes away from a vertical axis this far behind
 # iPhone), linear as every blend shape is; mouthClose is the lips shut against that jaw.
 JAW_OPEN_ANGLE = 0.66  # rad
 JAW_OPEN_SCALE = JAW_OPEN_ANGLE / JAW_MAX_ANGLE  # jawOpen 1 is this many of the rig's jaw turns (2.42)
-# ARKit's mouthStretch draws the corners out further than speech's spreading does (the rig's WIDE_SPREAD, set
-# on GRID's speakers): each corner moves across the face by this fraction of its distance from the mouth's
-# centre, the mouth 1.1 cm wider at weight 1 (the rig's lip_wide: 0.24 cm). On a real iPhone take the rig's
-# speech then solves to a mouthStretch range 0.33x the capture's; with the stretch the rig's own, 3.6x
-# (docs/arkit_capture.md). mouthPucker stays the rig's rounding: with a narrower kiss the fit cancels its
-# width with mouthStretch (r 0.98 between the two).
-STRETCH_SPREAD = 0.24
 
 
 def _smoothstep(t: np.ndarray) -> np.ndarray:
@@ -186,9 +180,8 @@ def _mouth(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     d.sided(out, "cheekSquint", d.delta(cheek_raise=1.0) - smile)
     d.sided(out, "mouthFrown", d.vec(dx=0.1 * np.tanh(X) * corner, dy=-0.45 * corner, dz=-0.05 * corner))
     d.sided(out, "mouthDimple", d.vec(dx=0.15 * np.tanh(X) * corner, dy=0.05 * corner, dz=-0.35 * corner))
-    Xc = np.clip(X, -d.rig.mouth_half, d.rig.mouth_half)
-    stretch = d.delta(lip_wide=1.0) + d.vec(dx=(STRETCH_SPREAD - WIDE_SPREAD) * Xc * f["peri"])
-    d.sided(out, "mouthStretch", stretch)
+    # the full stretch, of which speech's spreading is a part (rig.STRETCH_SPREAD): 1.1 cm wider at 1
+    d.sided(out, "mouthStretch", d.delta(lip_wide=1.0) * (STRETCH_SPREAD / WIDE_SPREAD))
     lat_wide = f["lat_wide"]
     shrug = d.field(f["d_lo"], 2.6, ~upper) * lat_wide
     out["mouthShrugLower"] = d.vec(dy=0.28 * shrug, dz=0.2 * shrug)

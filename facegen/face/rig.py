@@ -57,6 +57,12 @@ ROUND_FORWARD = 0.4  # cm the skin beside the mouth's corners comes forward at f
 # (0.36 and 0.24, set by eye) it gave -1.13 (UW -1.39) and +0.29 (IY +0.60).
 ROUND_NARROW = 0.11
 WIDE_SPREAD = 0.05
+# The mouth's full stretch (ARKit's mouthStretch): the corners out by this fraction of their distance from
+# the centre, the lips thinned and drawn back. Speech's spreading (lip_wide) is WIDE_SPREAD / STRETCH_SPREAD
+# of it, all of it, so that ARKit's fit reads a spread vowel as a part of a stretch (with only its width
+# scaled, the fit read the thinned, drawn-back lips as mouthRollUpper 0.5, mouthRollLower 0.4, mouthDimple
+# 0.3).
+STRETCH_SPREAD = 0.24
 
 
 def falloff(d: np.ndarray, radius: float) -> np.ndarray:
@@ -177,8 +183,9 @@ class Rig:
         forward = ROUND_FORWARD * np.abs(Xc) / half * wide_round
         off["lip_round"] = field(dx=-ROUND_NARROW * Xc * wide_round, dy=sgn * 0.22 * near * opening**0.7,
                                  dz=0.5 * peri_round**2 + 0.25 * near + forward)
-        off["lip_wide"] = field(dx=WIDE_SPREAD * Xc * peri,
-                                dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near, dz=-0.18 * peri)
+        stretch = field(dx=STRETCH_SPREAD * Xc * peri, dy=0.12 * (X / half) ** 2 * peri - sgn * 0.05 * near,
+                        dz=-0.18 * peri)
+        off["lip_wide"] = WIDE_SPREAD / STRETCH_SPREAD * stretch
         off["lip_funnel"] = field(dx=-0.18 * Xc * peri, dy=sgn * 0.3 * near * opening**0.3,
                                   dz=0.5 * peri**2 + 0.15 * near)
         off["lower_lip_tuck"] = field(dy=0.38 * w_lo * lat + 0.06 * w_up * lat, dz=-0.5 * w_lo * lat)

@@ -46,7 +46,8 @@ VERSION = 9  # 2: other languages; 3: their sentences without emotional words; 4
 # calibrated on running speech too (a real ARKit take: schwa reduced, open vowels wider, f/v lips to teeth);
 # 8: pauses before, inside and after a sentence (with_pauses), the speaker's loudness drifts
 # (facegen.synth.augment.loudness_drift); 9: each vowel's jaw reads its first formant (FORMANT_EXP), rounding
-# and spreading move the mouth's width as GRID's speakers do (facegen.face.rig.ROUND_NARROW, WIDE_SPREAD)
+# and spreading move the mouth's width as GRID's speakers do (facegen.face.rig.ROUND_NARROW, WIDE_SPREAD; the
+# spreading a part of the full stretch, STRETCH_SPREAD)
 MANIFEST = "voices.json"
 RATE = 16000  # Hz of the stored audio (the model's)
 FPS = 25.0
