@@ -99,8 +99,9 @@ def test_recovers_the_shift_and_the_scales(take):
         s = shapes[name]
         assert s["best_lag_frames"] == -3, name
         # (the benchmark's running mean from 60 to 25 fps, on_frames, takes a few percent off a quick jaw's
-        # peaks: up to ~8 % of the range of a jaw that anticipates its vowels by 0.05 s)
-        assert s["scale"] == pytest.approx(scale, rel=0.08), name
+        # peaks: up to ~9 % of the range of a jaw that anticipates its vowels by 0.05 s, now that jawOpen
+        # follows the rig's jaw_open in proportion, Shapes.hidden)
+        assert s["scale"] == pytest.approx(scale, rel=0.1), name
         # (the calibrated rig parts the lips before speech: the rest frames' jawOpen is not quite 0)
         assert s["offset"] == pytest.approx(0.0, abs=0.04), name
         assert s["range_ratio"] == pytest.approx(1 / scale, rel=0.1), name

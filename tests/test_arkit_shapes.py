@@ -69,6 +69,22 @@ def test_52_names_in_order_real_finite_offsets(shapes, face):
     assert not shapes.offsets.flags.writeable  # the cached arrays cannot be changed by a caller
 
 
+def test_the_hidden_offsets_are_the_jaws_arc_off_jaw_opens_line(shapes, face, rig):
+    """Shapes.hidden: the bulge of the rig's jaw turn off the straight line from closed to fully turned, at
+    half way (up to about 1 mm at the chin, nothing off the jaw), outwards and inwards."""
+    assert shapes.hidden.shape == (2, face.num_vertices, 3) and shapes.hidden.dtype == np.float32
+    assert not shapes.hidden.flags.writeable
+    arc = shapes.hidden[0]
+    assert np.array_equal(shapes.hidden[1], -arc)
+    half = rig.jaw_turn(0.5) - 0.5 * (rig.jaw_turn(0.0) + rig.jaw_turn(1.0))
+    assert np.abs(arc - half).max() < 1e-6
+    size = np.linalg.norm(arc, axis=1) / shapes.mm
+    assert 0.5 < size.max() < 1.5
+    assert size[rig.fields["jaw"] < 1e-4].max() < 1e-6  # only what the jaw turns
+    turn = shapes.offset("jawOpen")  # 0.1 of the way along jawOpen's line the jaw moves far more than that
+    assert size.max() < 0.1 * np.linalg.norm(turn, axis=1).max() / shapes.mm
+
+
 def test_jaw_open_drops_the_chin_and_parts_the_lips_leaving_the_brows(shapes, face):
     r, v, mm = face.regions, face.vertices, shapes.mm
     jaw_open = shapes.offset("jawOpen")
@@ -248,7 +264,7 @@ def test_cache_in_process_and_on_disk(shapes, face, cache):
     arkit._MEMO.clear()
     again = arkit.arkit_shapes(face)  # read from disk
     assert again is not shapes and again.names == shapes.names and again.mm == shapes.mm
-    assert np.array_equal(again.offsets, shapes.offsets)
+    assert np.array_equal(again.offsets, shapes.offsets) and np.array_equal(again.hidden, shapes.hidden)
     files[0].write_bytes(b"not a safetensors file")  # a damaged cache file is rebuilt
     arkit._MEMO.clear()
     rebuilt = arkit.arkit_shapes(face)

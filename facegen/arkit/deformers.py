@@ -216,6 +216,16 @@ def _upper_face(d: _Deformers, out: dict[str, np.ndarray]) -> None:
     out["cheekPuff"] = 0.6 * d.cm * puff[:, None] * outwards + d.vec(dz=0.1 * d.f["near"])
 
 
+def jaw_arc(rig: Rig) -> np.ndarray:
+    """The bulge [V, 3] of the rig's jaw turn off jawOpen's straight line, at its widest (jaw_open 1/2): the
+    jaw turned half way minus the mean of the template and the full turn. The rig's jaw is a rotation and
+    jawOpen a blend shape, linear as every one is, so a half-open jaw lies up to 1 mm off jawOpen's line
+    (about 4 j (1 - j) times this at jaw_open j). The ARKit fit solves for it and drops it (`Shapes.hidden`):
+    without it the fit made the bulge up out of other shapes, jaw_open 1/2 read as jawForward 0.19,
+    mouthShrugLower 0.18 and mouthRollLower 0.14 beside jawOpen 0.22 and mouthLowerDown 0.39."""
+    return rig.jaw_turn(0.5) - 0.5 * (rig.jaw_turn(0.0) + rig.jaw_turn(1.0))
+
+
 def shape_offsets(rig: Rig, regions: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """{ARKit name: offsets [V, 3] float64 at weight 1} for the face `rig` was built on (its `regions`)."""
     d = _Deformers(rig, regions)

@@ -32,11 +32,15 @@ _MEMO_SIZE = 4
 @dataclass(frozen=True, eq=False)
 class Shapes:
     """The 52 ARKit shapes of one face: `offsets` [52, V, 3] float32 (shape at weight 1 minus the template,
-    mesh units, read-only), in `names` order (ARKIT_NAMES); `mm` mesh units per millimetre."""
+    mesh units, read-only), in `names` order (ARKIT_NAMES); `mm` mesh units per millimetre. `hidden`
+    [2, V, 3] are offsets the ARKit fit solves for beside them and drops: the rig's motion no blend shape
+    holds (the bulge of its jaw's turn off jawOpen's straight line, outwards and inwards:
+    deformers.jaw_arc), so that the fit does not make it up out of ARKit shapes that mean something else."""
 
     names: tuple[str, ...]
     offsets: np.ndarray
     mm: float
+    hidden: np.ndarray
 
     def offset(self, name: str) -> np.ndarray:
         """The offsets [V, 3] of the shape called `name` (ARKit lowerCamel)."""
@@ -66,13 +70,16 @@ def _read(path: Path, num_vertices: int) -> Shapes | None:
         with safe_open(str(path), "np") as f:
             names = tuple((f.metadata() or {}).get("names", "").split(","))
             offsets = f.get_tensor("offsets")
+            hidden = f.get_tensor("hidden")
             mm = float(f.get_tensor("mm")[0])
     except Exception:  # noqa: BLE001 - a damaged cache file is simply rebuilt
         return None
     if (names != ARKIT_NAMES or offsets.shape != (len(ARKIT_NAMES), num_vertices, 3)
-            or offsets.dtype != np.float32 or not np.isfinite(offsets).all() or not mm > 0):
+            or hidden.shape != (2, num_vertices, 3) or offsets.dtype != np.float32
+            or hidden.dtype != np.float32 or not np.isfinite(offsets).all() or not np.isfinite(hidden).all()
+            or not mm > 0):
         return None
-    return _frozen(offsets, mm)
+    return _frozen(offsets, mm, hidden)
 
 
 def _write(path: Path, shapes: Shapes) -> None:
@@ -81,16 +88,19 @@ def _write(path: Path, shapes: Shapes) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
-            save_file({"offsets": shapes.offsets, "mm": np.array([shapes.mm], np.float64)}, str(tmp),
+            save_file({"offsets": shapes.offsets, "hidden": shapes.hidden,
+                       "mm": np.array([shapes.mm], np.float64)}, str(tmp),
                       metadata={"names": ",".join(shapes.names)})
     except (OSError, FacegenError):
         pass  # no cache: the next process builds the shapes again
 
 
-def _frozen(offsets: np.ndarray, mm: float) -> Shapes:
+def _frozen(offsets: np.ndarray, mm: float, hidden: np.ndarray) -> Shapes:
     offsets = np.ascontiguousarray(offsets, np.float32)
+    hidden = np.ascontiguousarray(hidden, np.float32)
     offsets.setflags(write=False)
-    return Shapes(ARKIT_NAMES, offsets, float(mm))
+    hidden.setflags(write=False)
+    return Shapes(ARKIT_NAMES, offsets, float(mm), hidden)
 
 
 def check_regions(mesh: Mesh) -> None:
@@ -104,13 +114,14 @@ def check_regions(mesh: Mesh) -> None:
 
 def build_shapes(mesh: Mesh) -> Shapes:
     """The 52 shapes of `mesh`, built now (no cache): a face from facegen.face.procedural (its regions)."""
-    from facegen.arkit.deformers import shape_offsets
+    from facegen.arkit.deformers import jaw_arc, shape_offsets
     from facegen.face.rig import Rig
 
     check_regions(mesh)
     rig = Rig(mesh)
     shapes = shape_offsets(rig, {k: np.asarray(v, np.int64) for k, v in mesh.regions.items()})
-    return _frozen(np.stack([shapes[name] for name in ARKIT_NAMES]), rig.cm / 10.0)
+    arc = jaw_arc(rig)
+    return _frozen(np.stack([shapes[name] for name in ARKIT_NAMES]), rig.cm / 10.0, np.stack([arc, -arc]))
 
 
 def arkit_shapes(mesh: Mesh) -> Shapes:

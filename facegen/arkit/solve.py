@@ -8,7 +8,9 @@ weights W ([T, 52]) minimise
         +  ridge * sum_t sum_k ||S_k||^2 w_tk^2 / V
 
 subject to 0 <= W <= 1 (the data term in mm^2 per vertex, so `smoothness` means the same on any mesh scale or
-vertex count). The small ridge, relative to each shape's own size, decides where shapes cancel each other
+vertex count). S also holds `Shapes.hidden`, the rig's motion no ARKit shape holds (its jaw turns on an arc,
+jawOpen moves on a line): the fit solves for their weights and drops them, and the errors are those of the
+52 weights alone. The small ridge, relative to each shape's own size, decides where shapes cancel each other
 (jawLeft + jawRight, mouthLeft + mouthRight move nothing on a symmetric face): the smallest weights win. The
 frames only enter through G = S^T S (52 x 52) and B = D S (T x 52), accumulated block by block, so a streamed
 animation is never held whole. The bounded problem is solved by ADMM over all frames at once: its linear step
@@ -91,7 +93,8 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *,
     if offsets.shape[1:] != (anim.num_vertices, 3):
         raise FacegenError(f"the ARKit shapes have {offsets.shape[1]} vertices but the animation has "
                            f"{anim.num_vertices}: fit an animation of the shapes' face")
-    basis = offsets.reshape(len(offsets), -1)  # [K, 3V] in mesh units
+    # [K + H, 3V] in mesh units: the 52 shapes, then the hidden ones, solved for and dropped
+    basis = np.concatenate([offsets, np.asarray(shapes.hidden, np.float32)]).reshape(-1, offsets[0].size)
     scale = 1.0 / (anim.num_vertices * shapes.mm**2)  # mesh units^2 summed over vertices -> mm^2 per vertex
     rest = np.asarray(anim.template, np.float32).reshape(-1)
     with threads(1, ("blas",)):
@@ -102,7 +105,9 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *,
             rhs = np.empty((anim.num_frames, len(basis)), np.float64)
             for start, block in anim.frame_blocks(BLOCK_FRAMES):
                 rhs[start : start + len(block)] = (block.reshape(len(block), -1) - rest) @ basis.T * scale
-        weights = solve_weights(gram, rhs, smoothness, ridge=RIDGE).astype(np.float32)
+        weights = np.ascontiguousarray(solve_weights(gram, rhs, smoothness, ridge=RIDGE)[:, : len(offsets)],
+                                       np.float32)
+        basis = basis[: len(offsets)]  # the errors are those of the 52 weights, as an ARKit rig poses them
         set_tongue_out(weights, shapes.names, anim)
         every = -(-anim.num_frames // ERROR_FRAMES_MEASURED)
         lip_error, face_error = fit_errors(anim, _every(anim, every), basis, weights[::every],
