@@ -180,6 +180,24 @@ def test_an_f_brings_the_lower_lip_to_the_teeth_between_open_vowels(rig):
     assert aperture[int(0.75 * fps)] < 0.5 and around > 1.0, aperture[[60, 75, 92]]
 
 
+def test_a_bilabial_closes_the_lips_and_leaves_the_jaw_part_open(rig):
+    """At the middle of a p/b/m real speakers' chin is 0.55 as far down as at a vowel's middle (GRID, tracked),
+    0.41 on a real iPhone take: the lips close, the jaw stays part open. Between two open vowels the rig's /b/
+    closes the lips (aperture under 0.05 cm) while its jaw stays 0.3-0.65 of the vowels'; before the
+    calibration it shut the jaw (0.07 of them)."""
+    assert 0.3 <= curves.BILABIAL_JAW <= 0.7
+    target, dom_jaw, _ = curves.VISEMES["PBM"]
+    assert 0.05 <= target[JAW] <= 0.3 and 0.8 <= dom_jaw <= 1.5
+    fps = 100.0
+    phones = [("AA1", 0.5, 0.7), ("B", 0.7, 0.78), ("AA1", 0.78, 1.0)]
+    lower = viseme_curves(phones, int(1.3 * fps), fps, alphabet="cmu")
+    aperture = _aperture(rig, lower)
+    middle, vowels = int(0.74 * fps), [int(0.6 * fps), int(0.9 * fps)]
+    share = lower[middle, JAW] / lower[vowels, JAW].mean()
+    assert aperture[middle] < 0.05 and lower[middle, CLOSE] > 0.99, aperture[middle]
+    assert 0.3 <= share <= 0.65, (lower[middle, JAW], lower[vowels, JAW])
+
+
 def test_calibrate_rig_follows_the_jaw_of_a_real_take(tmp_path):
     """calibrate_rig.py --capture: a take whose jawOpen is the rig's jaw_open with known parameters (schwa
     0.5, anticipation 50 ms), from the phones of the words facegen hears in the example's speech, at 60 fps
