@@ -44,6 +44,19 @@ VOWEL_CLASSES = {
 }
 
 
+# consonant classes for the jaw at consonants (the rig's consonant visemes, facegen.phonetics)
+CONSONANT_CLASSES = {
+    "p/b/m": ("P", "B", "M"),
+    "f/v": ("F", "V"),
+    "th": ("TH", "DH"),
+    "s/z/sh": ("S", "Z", "SH", "ZH", "CH", "JH"),
+    "t/d/n": ("T", "D", "N"),
+    "l": ("L",),
+    "k/g": ("K", "G", "NG"),
+    "w": ("W",),
+}
+
+
 @dataclass
 class Tracks:
     """What the tracker saw of one face, per frame, in cm: `aperture`, `width`, `jaw`; `found` frames with a
@@ -264,6 +277,27 @@ def summarize_vowels(
         g: {"n": len(rs), **{k: float(np.median([r[k] for r in rs])) for k in keys}}
         for g, rs in sorted(groups.items())
     }
+
+
+def jaw_at_consonants(clips: Sequence[tuple[np.ndarray, Sequence]], fps: float) -> dict[str, dict]:
+    """How far the jaw is open at consonants against vowels: over `clips` ((jaw [T] in cm, phones) pairs),
+    the mean jaw at the middle of each CONSONANT_CLASSES phone over the mean at the middle of every vowel
+    ({class: {"n", "ratio"}}, with "vowels": {"n", "jaw"} in cm). The tracker's jaw is the clip's nose-to-chin
+    distance less its 5th percentile, so a class's ratio says how much of the vowels' opening it keeps."""
+    found: dict[str, list[float]] = {}
+    for jaw, phones in clips:
+        for name, start, end in phones:
+            name = str(name).upper().rstrip("012")
+            key = "vowels" if name in CMU_VOWELS else next(
+                (c for c, members in CONSONANT_CLASSES.items() if name in members), None)
+            if key is not None:
+                found.setdefault(key, []).append(_at(jaw, (float(start) + float(end)) / 2, fps))
+    vowels = float(np.mean(found["vowels"])) if found.get("vowels") else None
+    out: dict[str, dict] = {"vowels": {"n": len(found.get("vowels", [])), "jaw": vowels}}
+    for c in CONSONANT_CLASSES:
+        vals = found.get(c, [])
+        out[c] = {"n": len(vals), "ratio": float(np.mean(vals)) / vowels if vals and vowels else None}
+    return out
 
 
 def response_curve(

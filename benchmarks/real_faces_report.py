@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from real_faces_measures import pooled_best, response_curve, summarize_vowels
+from real_faces_measures import jaw_at_consonants, pooled_best, response_curve, summarize_vowels
 
 TARGETS = {"aperture_r": 0.65, "median_ratio": (0.7, 1.3), "closure_rate": 0.80}  # issue 23, GRID-like speech
 
@@ -79,6 +79,9 @@ def summarize(clips: dict[str, dict]) -> dict:
         out[f"width_range_{who}_cm"] = np.mean([r[f"width_range_{who}_cm"] for r in rows], 0).tolist()
         out[f"rest_width_{who}_cm"] = mean(f"rest_width_{who}_cm")
         out[f"jaw_p95_{who}_cm"] = mean(f"jaw_p95_{who}_cm")
+    for who in ("real", "facegen"):
+        out[f"jaw_at_consonants_{who}"] = jaw_at_consonants(
+            [(np.asarray(r["tracks"][who]["jaw"]), r["phones"]) for r in rows], 25.0)
     out["tracker_on_facegen"] = response_curve(
         np.concatenate([r["tracks"]["facegen"]["aperture"] for r in rows]),
         np.concatenate([r["tracks"]["facegen"]["geometric_aperture"] for r in rows]),
@@ -154,6 +157,13 @@ def table(result: dict) -> str:
             f"{_f(a['width_change'], '{:+.2f}')} / {_f(b.get('width_change'), '{:+.2f}')} / "
             f"{_f(b.get('geometric_width_change'), '{:+.2f}')} |"
         )
+    cr, cf = s.get("jaw_at_consonants_real"), s.get("jaw_at_consonants_facegen")
+    if cr and cf:
+        classes = [c for c in cr if c != "vowels"]
+        lines += ["", "| jaw at the consonant ÷ at vowels, real / facegen (tracked) | "
+                  + " | ".join(f"{c} ({cr[c]['n']})" for c in classes) + " |",
+                  "|---|" + "---|" * len(classes),
+                  "| | " + " | ".join(f"{_f(cr[c]['ratio'])} / {_f(cf[c]['ratio'])}" for c in classes) + " |"]
     lines.append("")
     lines.append(
         "targets: " + ", ".join(f"{k}: {'met' if v else 'NOT met'}" for k, v in s["targets"].items())

@@ -89,6 +89,19 @@ def test_vowels_per_viseme_and_class():
     assert summary["AA"]["n"] == 2 and summary["class:open"]["n"] == 2 and summary["class:spread"]["n"] == 1
 
 
+def test_jaw_at_consonants_over_vowels():
+    jaw = np.zeros(50)
+    jaw[10:15] = 1.0  # AA at 0.4-0.6 s: middle 0.5 s, frame 12.5
+    jaw[20:25] = 0.5  # B at 0.8-1.0 s
+    jaw[30:35] = 0.2  # F at 1.2-1.4 s
+    phones = [("AA1", 0.4, 0.6), ("B", 0.8, 1.0), ("F", 1.2, 1.4), ("ZZ", 1.5, 1.6)]
+    out = m.jaw_at_consonants([(jaw, phones), (jaw * 2, [("IY", 0.4, 0.6)])], FPS)
+    assert out["vowels"] == {"n": 2, "jaw": pytest.approx(1.5)}
+    assert out["p/b/m"] == {"n": 1, "ratio": pytest.approx(0.5 / 1.5)}
+    assert out["f/v"]["ratio"] == pytest.approx(0.2 / 1.5)
+    assert out["k/g"] == {"n": 0, "ratio": None}  # no k/g; an unknown phone is in no class
+
+
 def test_leads_of_the_lips_over_the_sound():
     t = np.arange(0, 3, 0.01)
     loud = np.where((t > 0.8) & (t < 2.0), -10.0, -60.0) + 5 * np.sin(2 * np.pi * 4 * (t - 0.8))

@@ -110,9 +110,9 @@ CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.034, 0.06  # s, the lips' and the jaw's ramps
 # A p/b/m closes the lips (lip_close seals them whatever the jaw does); the jaw stays part open, as the vowels
 # around it hold it: at the middle of a p/b/m real speakers' chin is 0.55 as far down as at the middle of a
 # vowel (GRID, 14 bilabials, 10 speakers, tracked), 0.41 on a real iPhone take (jawOpen, 7). The rig shut it
-# (jaw_open at most 0.06, PBM's jaw 0.04 with dominance 1.5: 0.11 of the vowels'); with BILABIAL_JAW 0.5 and the
-# PBM viseme's jaw 0.15 at dominance 1.2 it is 0.50, the lips still closed at every p/b/m, GRID's lip r 0.744 /
-# 0.747 -> 0.740 / 0.745 (fitted / held-out half), the take's jaw r 0.584 / 0.730 -> 0.604 / 0.739
+# (jaw_open at most 0.06, PBM's jaw 0.04 with dominance 1.5: 0.11 of the vowels'); with BILABIAL_JAW 0.5 and
+# the PBM viseme's jaw 0.15 at dominance 1.2 it is 0.50, the lips still closed at every p/b/m, GRID's lip r
+# 0.744 / 0.747 -> 0.740 / 0.745 (fitted / held-out half), the take's jaw r 0.584 / 0.730 -> 0.604 / 0.739
 # (docs/real_faces.md, eleventh pass).
 BILABIAL_JAW = 0.5  # the jaw_open a p/b/m allows at most
 # People part their lips before they speak after a pause (an in-breath: real speakers 0.02-0.43 s before the
