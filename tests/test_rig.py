@@ -13,6 +13,7 @@ from facegen.face.procedural import make_face, speaker_face
 from facegen.face.rig import CHANNELS, EXPRESSIONS, LOWER_CHANNELS, UPPER_CHANNELS, Rig
 from facegen.phonetics import phone_visemes
 from facegen.synth.curves import (
+    BILABIAL_JAW,
     SpeakerStyle,
     blink_curves,
     expression_curves,
@@ -209,9 +210,11 @@ def test_lips_close_on_bilabials_and_the_jaw_opens_for_vowels():
     t = np.arange(30) / FPS
     in_p = (t >= 0.48) & (t <= 0.60)
     assert in_p.sum() >= 2
-    assert close[in_p].min() > 0.99 and jaw[in_p].max() < 0.07
     mid_vowels = [int(0.38 * FPS), int(0.72 * FPS)]
     assert jaw[mid_vowels].min() > 0.3 and close[mid_vowels].max() < 0.3
+    # the lips shut, the jaw part open as the vowels around it hold it (real speakers: about half)
+    assert close[in_p].min() > 0.99 and jaw[in_p].max() <= BILABIAL_JAW + 1e-6
+    assert 0.2 * jaw[mid_vowels].mean() < jaw[in_p].min() and jaw[in_p].max() < 0.7 * jaw[mid_vowels].mean()
     # silence before speech: near rest, the lips parting ahead of it (coarticulation 0.117 s, calibrated on
     # real faces: people's lips lead their sound)
     assert np.abs(curves[:2]).max() < 0.15 and jaw[0] < jaw[1] < 0.5 * jaw[mid_vowels].min()
