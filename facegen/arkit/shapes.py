@@ -33,9 +33,9 @@ _MEMO_SIZE = 4
 class Shapes:
     """The 52 ARKit shapes of one face: `offsets` [52, V, 3] float32 (shape at weight 1 minus the template,
     mesh units, read-only), in `names` order (ARKIT_NAMES); `mm` mesh units per millimetre. `hidden`
-    [2, V, 3] are offsets the ARKit fit solves for beside them and drops: the rig's motion no blend shape
-    holds (the bulge of its jaw's turn off jawOpen's straight line, outwards and inwards:
-    deformers.jaw_arc), so that the fit does not make it up out of ARKit shapes that mean something else."""
+    [1, V, 3] are offsets the ARKit fit solves for beside them, with either sign, and drops: the rig's motion
+    no blend shape holds (the bulge of its jaw's turn off jawOpen's straight line, deformers.jaw_arc), so that
+    the fit does not make it up out of ARKit shapes that mean something else."""
 
     names: tuple[str, ...]
     offsets: np.ndarray
@@ -75,7 +75,7 @@ def _read(path: Path, num_vertices: int) -> Shapes | None:
     except Exception:  # noqa: BLE001 - a damaged cache file is simply rebuilt
         return None
     if (names != ARKIT_NAMES or offsets.shape != (len(ARKIT_NAMES), num_vertices, 3)
-            or hidden.shape != (2, num_vertices, 3) or offsets.dtype != np.float32
+            or hidden.shape != (1, num_vertices, 3) or offsets.dtype != np.float32
             or hidden.dtype != np.float32 or not np.isfinite(offsets).all() or not np.isfinite(hidden).all()
             or not mm > 0):
         return None
@@ -120,8 +120,7 @@ def build_shapes(mesh: Mesh) -> Shapes:
     check_regions(mesh)
     rig = Rig(mesh)
     shapes = shape_offsets(rig, {k: np.asarray(v, np.int64) for k, v in mesh.regions.items()})
-    arc = jaw_arc(rig)
-    return _frozen(np.stack([shapes[name] for name in ARKIT_NAMES]), rig.cm / 10.0, np.stack([arc, -arc]))
+    return _frozen(np.stack([shapes[name] for name in ARKIT_NAMES]), rig.cm / 10.0, jaw_arc(rig)[None])
 
 
 def arkit_shapes(mesh: Mesh) -> Shapes:

@@ -93,8 +93,10 @@ def fit_arkit(anim: Animation, smoothness: float = DEFAULT_SMOOTHNESS, *,
     if offsets.shape[1:] != (anim.num_vertices, 3):
         raise FacegenError(f"the ARKit shapes have {offsets.shape[1]} vertices but the animation has "
                            f"{anim.num_vertices}: fit an animation of the shapes' face")
-    # [K + H, 3V] in mesh units: the 52 shapes, then the hidden ones, solved for and dropped
-    basis = np.concatenate([offsets, np.asarray(shapes.hidden, np.float32)]).reshape(-1, offsets[0].size)
+    # [K + 2H, 3V] in mesh units: the 52 shapes, then the hidden ones with either sign (the weights are >= 0),
+    # solved for and dropped
+    hidden = np.asarray(shapes.hidden, np.float32)
+    basis = np.concatenate([offsets, hidden, -hidden]).reshape(-1, offsets[0].size)
     scale = 1.0 / (anim.num_vertices * shapes.mm**2)  # mesh units^2 summed over vertices -> mm^2 per vertex
     rest = np.asarray(anim.template, np.float32).reshape(-1)
     with threads(1, ("blas",)):

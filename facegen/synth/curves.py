@@ -108,7 +108,7 @@ JAW_ANTICIPATION_S = 0.05  # s, the jaw channel's time constant ahead
 CARRYOVER_S = 0.019  # s, after it
 CLOSE_RAMP_S, JAW_CLOSE_RAMP_S = 0.034, 0.06  # s, the lips' and the jaw's ramps into and out of a p/b/m
 # A p/b/m closes the lips (lip_close seals them whatever the jaw does); the jaw stays part open, as the vowels
-# around it hold it: at the middle of a p/b/m real speakers' chin is 0.55 as far down as at the middle of a
+# around it hold it: at the middle of a p/b/m real speakers' chin is 0.57 as far down as at the middle of a
 # vowel (GRID, 14 bilabials, 10 speakers, tracked), 0.41 on a real iPhone take (jawOpen, 7). The rig shut it
 # (jaw_open at most 0.06, PBM's jaw 0.04 with dominance 1.5: 0.11 of the vowels'); with BILABIAL_JAW 0.5 and
 # the PBM viseme's jaw 0.15 at dominance 1.2 it is 0.50, the lips still closed at every p/b/m, GRID's lip r
