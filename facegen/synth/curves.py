@@ -54,17 +54,20 @@ def _v(**kw: float) -> np.ndarray:
 # speech; docs/real_faces.md): open vowels open widest (0.87 at a clip's median loudness: louder ones and
 # wide-jawed speakers open up to 1, PROSODY_GAIN and the style's jaw_gain), schwa least (reduced in running
 # speech); f/v's lip_close (0.9) brings the lower lip to the upper teeth (GRID's speakers at an f: 0.14 cm,
-# a v: 0.22).
+# a v: 0.22). The consonants' jaw sits where real speakers hold it, as a share of the vowels' around it
+# (GRID's chin at the consonants' middles, docs/real_faces.md, twelfth pass): raised for an f/v (0.38; the
+# iPhone take's jawOpen 0.14), which brings the lower lip to the upper teeth, lowered for an l (0.98: the
+# tongue tip makes its contact; a low jaw keeps the sides of the tongue free, Mooshammer et al. 2003).
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
     "inhale": (_v(), 0.81, 1.0),  # lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
     "PBM": (_v(jaw_open=0.15, lip_close=1.0), 1.2, 2.5),  # the jaw part open (BILABIAL_JAW)
-    "FV": (_v(jaw_open=0.08, lip_close=0.9, lower_lip_tuck=1.0, upper_lip_raise=0.25), 0.89, 3.0),
+    "FV": (_v(jaw_open=0.08, lip_close=0.9, lower_lip_tuck=1.0, upper_lip_raise=0.25), 2.5, 3.0),
     "TH": (_v(jaw_open=0.15, lip_wide=0.15), 0.89, 0.8),
     "SZ": (_v(jaw_open=0.07, lip_wide=0.45), 1.19, 1.2),
     "SH": (_v(jaw_open=0.1, lip_funnel=1.0, lip_round=0.2), 0.72, 2.5),
     "TDN": (_v(jaw_open=0.15, lip_wide=0.1), 0.59, 0.3),
-    "L": (_v(jaw_open=0.2), 0.59, 0.3),
+    "L": (_v(jaw_open=0.5), 0.59, 0.3),
     "R": (_v(jaw_open=0.12, lip_round=0.45, lip_funnel=0.35), 0.59, 2.0),
     "KG": (_v(jaw_open=0.2), 0.47, 0.3),
     "H": (_v(jaw_open=0.25), 0.18, 0.2),

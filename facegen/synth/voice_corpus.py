@@ -41,14 +41,15 @@ from facegen.processes import process_pool
 from facegen.runtime import SILENT, Reporter, set_threads
 from facegen.synth.voices import CORPUS_LANGUAGES, FOREIGN_VARIANTS
 
-VERSION = 10  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
+VERSION = 11  # 2: other languages; 3: their sentences without emotional words; 4: a stop takes its closure;
 # 5: rounded lips pursed (facegen.synth.curves.ROUND_CLOSE); (6: a level contour, reverted); 7: the jaw
 # calibrated on running speech too (a real ARKit take: schwa reduced, open vowels wider, f/v lips to teeth);
 # 8: pauses before, inside and after a sentence (with_pauses), the speaker's loudness drifts
 # (facegen.synth.augment.loudness_drift); 9: each vowel's jaw reads its first formant (FORMANT_EXP), rounding
 # and spreading move the mouth's width as GRID's speakers do (facegen.face.rig.ROUND_NARROW, WIDE_SPREAD; the
 # spreading a part of the full stretch, STRETCH_SPREAD); 10: the jaw stays part open through a p/b/m
-# (facegen.synth.curves.BILABIAL_JAW and the PBM viseme's jaw, set on GRID's speakers and the iPhone take)
+# (facegen.synth.curves.BILABIAL_JAW and the PBM viseme's jaw, set on GRID's speakers and the iPhone take);
+# 11: the jaw raised for an f/v and lowered for an l, as GRID's speakers hold it (the FV and L visemes)
 MANIFEST = "voices.json"
 RATE = 16000  # Hz of the stored audio (the model's)
 FPS = 25.0
