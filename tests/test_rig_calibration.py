@@ -10,6 +10,7 @@ at utterance onsets, Chandrasekaran et al. 2009).
 
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -31,13 +32,11 @@ JAW, CLOSE = LOWER_CHANNELS.index("jaw_open"), LOWER_CHANNELS.index("lip_close")
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-def _calibrate_rig():
-    """benchmarks/calibrate_rig.py as a module (and arkit_capture.py beside it, which it imports)."""
+def _bench(name: str):
+    """benchmarks/NAME.py as a module (benchmarks/ on the path, for the modules beside it that it imports)."""
     if str(BENCH) not in sys.path:
         sys.path.insert(0, str(BENCH))
-    import calibrate_rig
-
-    return calibrate_rig
+    return importlib.import_module(name)
 
 
 @pytest.fixture(scope="module")
@@ -145,7 +144,7 @@ def test_calibrate_rig_recovers_a_known_rounding_and_reports_it_per_phone():
     clips more open in those tracks than in today's rig (less pursed)."""
     import json
 
-    cr = _calibrate_rig()
+    cr = _bench("calibrate_rig")
     result = json.loads((BENCH / "results" / "real_faces_pursed.json").read_text())
     names = ["lwbsza", "pwij3p", "swiz3n"]  # "white" in each: W, AY, T
     clips = [{"name": n, "real": np.zeros(len(result["clips"][n]["tracks"]["real"]["aperture"])),
@@ -208,7 +207,7 @@ def test_calibrate_rig_follows_the_jaw_of_a_real_take(tmp_path):
     from facegen.synth.curves import formant_track, loudness_envelope
     from facegen.word_timing import clip_words_and_phones
 
-    cr = _calibrate_rig()
+    cr = _bench("calibrate_rig")
     wav = BENCH.parent / "examples" / "excellent_room.wav"
     audio, sr = load_audio(wav)
     n = int(len(audio) / sr * 25.0)
@@ -296,8 +295,7 @@ def test_calibrate_width_finds_the_rigs_own_widths(tmp_path):
     widths come back with the rig's values and the constants are restored."""
     import json
 
-    _calibrate_rig()  # benchmarks/ on the path
-    import calibrate_width as cw
+    cw = _bench("calibrate_width")
 
     from facegen.face import rig as rig_module
 
@@ -326,15 +324,13 @@ def test_the_jaw_at_each_consonant_class_sits_where_real_speakers_hold_it():
     theirs; before the twelfth pass its f/v was 1.58x theirs and its l 0.70x (docs/real_faces.md)."""
     import json
 
-    if str(BENCH) not in sys.path:
-        sys.path.insert(0, str(BENCH))
-    from real_faces_measures import CONSONANT_CLASSES, jaw_at_consonants
-
+    measures = _bench("real_faces_measures")
+    jaw_at_consonants = measures.jaw_at_consonants
     clips = json.loads((BENCH / "results" / "real_faces_y1a.json").read_text())["clips"].values()
     real = jaw_at_consonants([(np.asarray(c["tracks"]["real"]["jaw"]), c["phones"]) for c in clips], 25.0)
     posed = [(viseme_curves([tuple(p) for p in c["phones"]], len(c["tracks"]["real"]["jaw"]), 25.0,
                             alphabet="cmu")[:, JAW], c["phones"]) for c in clips]
     rig = jaw_at_consonants(posed, 25.0)
     assert real["f/v"]["n"] == 5 and real["f/v"]["ratio"] == pytest.approx(0.38, abs=0.01)
-    ratios = {c: rig[c]["ratio"] / real[c]["ratio"] for c in CONSONANT_CLASSES}
+    ratios = {c: rig[c]["ratio"] / real[c]["ratio"] for c in measures.CONSONANT_CLASSES}
     assert all(0.8 <= r <= 1.25 for r in ratios.values()), ratios

@@ -56,8 +56,8 @@ def _v(**kw: float) -> np.ndarray:
 # speech); f/v's lip_close (0.9) brings the lower lip to the upper teeth (GRID's speakers at an f: 0.14 cm,
 # a v: 0.22). The consonants' jaw sits where real speakers hold it, as a share of the vowels' around it
 # (GRID's chin at the consonants' middles, docs/real_faces.md, twelfth pass): raised for an f/v (0.38; the
-# iPhone take's jawOpen 0.14), which brings the lower lip to the upper teeth, lowered for an l (0.98: the
-# tongue tip makes its contact; a low jaw keeps the sides of the tongue free, Mooshammer et al. 2003).
+# iPhone take's jawOpen 0.14), which brings the lower lip to the upper teeth, lowered for an l (0.98: a low
+# jaw avoids lateral contact and allows its apical articulation, Mooshammer et al. 2003).
 VISEMES: dict[str, tuple[np.ndarray, float, float]] = {
     "rest": (_v(), 1.5, 1.5),
     "inhale": (_v(), 0.81, 1.0),  # lips parting before speech after a pause (PRE_SPEECH_S, PRE_SPEECH_JAW)
